@@ -1,0 +1,1 @@
+"""Scenarios, random streams, the Monte-Carlo engine and the PCRLB."""

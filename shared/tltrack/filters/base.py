@@ -1,0 +1,39 @@
+"""The one interface every filter offers, whatever it approximates the posterior with."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.models.measurement import RangeBearing
+from tltrack.models.observation import Observation
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Posterior mean (B, n_x) and covariance (B, n_x, n_x) for each run of the batch."""
+
+    mean: Array
+    cov: Array
+
+
+class Filter(Protocol):
+    """predict / update / estimate, plus the source's predicted-observation moments."""
+
+    def predict(self) -> None:
+        """Advance the prior from k-1 to k."""
+
+    def update(self, observations: Sequence[Observation]) -> None:
+        """Condition on every Gaussian statement about h(x_k) in the list."""
+
+    def estimate(self) -> Estimate:
+        """The current posterior's mean and covariance."""
+
+    def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
+        """Moments of eta = h(x) + w under the current (predicted) state density."""

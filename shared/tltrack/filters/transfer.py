@@ -1,0 +1,49 @@
+"""The two roles of the TL-PF, for any :class:`~tltrack.filters.base.Filter`.
+
+Source (Algorithm 1): update at k, then propagate once and summarise the propagated density as the
+predicted observation (eta_hat_{k+1}, P_eta_eta,k+1). The propagated state *is* its prior at k+1,
+so its next step skips the predict: the source draws exactly the random numbers an isolated filter
+with its data would, and its estimates equal that filter's.
+
+Primary (Algorithm 2): predict, then update on its own measurement together with every transfer
+whose ``k_apply`` is k. With no transfer it is the isolated filter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from tltrack.filters.base import Array, Estimate, Filter
+from tltrack.models.measurement import RangeBearing
+from tltrack.models.observation import Observation
+
+
+class Source:
+    """Algorithm 1: ``step(z_k)`` returns the estimate at k and the transfer for k + 1."""
+
+    def __init__(self, filt: Filter, sensor: RangeBearing, R: Array) -> None:
+        self.filter = filt
+        self.sensor = sensor
+        self.R = R
+        self._predicted = False
+
+    def step(self, z: Observation) -> tuple[Estimate, Observation]:
+        if not self._predicted:
+            self.filter.predict()
+        self.filter.update([z])
+        est = self.filter.estimate()
+        self.filter.predict()
+        self._predicted = True
+        return est, self.filter.predicted_observation(self.sensor, self.R)
+
+
+class Primary:
+    """Algorithm 2: ``step(z_k, transfers)``; an empty ``transfers`` is an isolated step."""
+
+    def __init__(self, filt: Filter) -> None:
+        self.filter = filt
+
+    def step(self, z: Observation, transfers: Sequence[Observation] = ()) -> Estimate:
+        self.filter.predict()
+        self.filter.update([z, *transfers])
+        return self.filter.estimate()
