@@ -53,6 +53,11 @@ PRESET_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
 }
 
 
+def preset_values(scenario: str, preset: str) -> dict[str, Any]:
+    """The scenario's seed values with the preset's differences applied."""
+    return {**SCENARIO_DEFAULTS[scenario], **PRESET_OVERRIDES[preset][scenario]}
+
+
 class SourceSpec(BaseModel):
     """One source operator: its id, sensor, and (for robustness studies) an injected fault."""
 
@@ -101,8 +106,7 @@ class Config(BaseModel):
         preset = data.get("preset", "paper")
         if scenario not in SCENARIO_DEFAULTS or preset not in PRESET_OVERRIDES:
             return data  # the field validators name the bad value
-        filled = {**SCENARIO_DEFAULTS[scenario], **PRESET_OVERRIDES[preset][scenario]}
-        return {**filled, **data}
+        return {**preset_values(scenario, preset), **data}
 
     @model_validator(mode="after")
     def _check_dimensions(self) -> Config:
@@ -130,12 +134,20 @@ class Config(BaseModel):
         return self.sources[0]
 
     def with_(self, **changes: Any) -> Config:
-        """A validated copy with some fields changed (re-filling the preset if it changed)."""
+        """A validated copy with some fields changed; raises :class:`ConfigError`.
+
+        Changing the scenario or preset re-fills every field that still has the old preset's value.
+        """
         data = self.model_dump()
-        if "scenario" in changes or "preset" in changes:
-            explicit = self.model_fields_set
-            data = {k: v for k, v in data.items() if k in explicit}
-        return Config.model_validate({**data, **changes})
+        if {"scenario", "preset"} & changes.keys():
+            old = preset_values(self.scenario, self.preset)
+            data = {k: v for k, v in data.items() if k not in old or old[k] != v}
+        return make_config(data, **changes)
+
+    def with_source_intensity(self, intensity: float) -> Config:
+        """The same experiment with the (first) source's noise intensity changed."""
+        first = {**self.sources[0].model_dump(), "intensity": intensity}
+        return self.with_(sources=[first, *self.sources[1:]])
 
 
 class ConfigError(ValueError):

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from tltrack.filters.base import Estimate
 from tltrack.filters.resampling import systematic_indices
-from tltrack.models.measurement import BEARING, RangeBearing, wrap_angle
+from tltrack.models.measurement import RangeBearing
 from tltrack.models.motion import MotionModel
 from tltrack.models.observation import Observation
 
@@ -30,9 +30,7 @@ Array = NDArray[np.float64]
 
 def gaussian_loglik(obs: Observation, x: Array) -> Array:
     """log N(obs.mean; h(x), obs.cov) up to a per-run constant, (B, N) (seed eq. TL_tr_likelihood_2)."""
-    zhat = obs.sensor.h(x)  # (2, B, N)
-    d = obs.mean[:, :, None] - zhat
-    d[BEARING] = wrap_angle(d[BEARING])
+    d = obs.sensor.residual(obs.mean[:, :, None], obs.sensor.h(x))  # (2, B, N)
     Pinv = np.linalg.inv(obs.cov)  # (B, 2, 2)
     a = Pinv[:, 0, 0, None]
     b = Pinv[:, 0, 1, None]
@@ -109,9 +107,7 @@ class ParticleFilter:
         The bearing's mean is circular, and deviations are wrapped, as tracks cross the +-pi cut.
         """
         Z = sensor.h(self.x)  # (2, B, N)
-        bearing = np.arctan2(np.sin(Z[1]).mean(axis=1), np.cos(Z[1]).mean(axis=1))
-        eta = np.stack([Z[0].mean(axis=1), bearing])  # (2, B)
-        d = Z - eta[:, :, None]
-        d[BEARING] = wrap_angle(d[BEARING])
+        eta = sensor.mean(Z, axis=2)  # (2, B)
+        d = sensor.residual(Z, eta[:, :, None])
         cov = np.einsum("ibn,jbn->bij", d, d) / self.N + R
         return Observation(sensor, eta, cov)

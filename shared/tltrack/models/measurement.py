@@ -55,6 +55,12 @@ class RangeBearing:
         J[1, POS[0]], J[1, POS[1]] = -dy / r2, dx / r2
         return J
 
+    def mean(self, Z: Array, axis: int) -> Array:
+        """Sample mean of measurements along ``axis``; the bearing's is circular."""
+        r = Z[0].mean(axis=axis - 1)
+        b = np.arctan2(np.sin(Z[BEARING]).mean(axis=axis - 1), np.cos(Z[BEARING]).mean(axis=axis - 1))
+        return np.stack([r, b])
+
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat with the bearing wrapped; measurement components on the first axis."""
         d = np.asarray(z, dtype=float) - zhat

@@ -1,0 +1,87 @@
+"""Filter names, as the CLI and the services spell them, and how to build each one.
+
+A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, ``ukf``, ``ckf3``,
+``ckf5``) and the role is how it is fed:
+
+- no prefix: the isolated primary, its own measurement only;
+- ``tl-``: the primary with every source's transfer (Algorithm 2 / the stacked TL-KF update);
+- ``source-``: a source operator's filter (Algorithm 1), of the same kind as its TL primary;
+- ``fusion-``: centralized fusion, the primary given every source's *raw* measurement too. It is
+  the bound that transfer trades away for privacy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.config import Config
+from tltrack.engine.streams import streams
+from tltrack.filters.base import Filter
+from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, unscented
+from tltrack.models.motion import MotionModel
+
+Kind = Literal["pf", "ukf", "ckf3", "ckf5"]
+Role = Literal["isolated", "tl", "source", "fusion"]
+KINDS: tuple[Kind, ...] = ("pf", "ukf", "ckf3", "ckf5")
+_PREFIX: dict[str, Role] = {"tl": "tl", "source": "source", "fusion": "fusion"}
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    name: str
+    kind: Kind
+    role: Role
+
+    @property
+    def source_name(self) -> str:
+        """The source filter a TL primary of this kind listens to."""
+        return f"source-{self.kind}"
+
+
+def parse(name: str) -> FilterSpec:
+    """``"tl-ckf5"`` -> FilterSpec("tl-ckf5", "ckf5", "tl"); refuses unknown names clearly."""
+    prefix, _, rest = name.partition("-")
+    role: Role = "isolated"
+    kind = name
+    if rest:
+        if prefix not in _PREFIX:
+            raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
+        role, kind = _PREFIX[prefix], rest
+    if kind not in KINDS or (role == "fusion" and kind != "pf"):
+        raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
+    return FilterSpec(name, kind, role)  # type: ignore[arg-type]
+
+
+def all_names() -> list[str]:
+    names = [f"{p}{k}" for k in KINDS for p in ("", "tl-", "source-")]
+    return [*names, "fusion-pf"]
+
+
+def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
+    """The random-stream purpose of a filter; a source's carries its operator id."""
+    return f"{spec.name}/{source_id}" if spec.role == "source" else spec.name
+
+
+def build(
+    spec: FilterSpec,
+    cfg: Config,
+    model: MotionModel,
+    x0_hat: NDArray[np.float64],
+    runs: Sequence[int],
+    source_id: str | None = None,
+) -> Filter:
+    """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0)."""
+    P0 = np.diag(cfg.P0_diag)
+    if spec.kind == "pf":
+        rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id))
+        return ParticleFilter(model, x0_hat, P0, cfg.particles, rngs)
+    n = model.n
+    rule = {"ukf": lambda: unscented(n, cfg.kappa), "ckf3": lambda: cubature3(n),
+            "ckf5": lambda: cubature5(n)}[spec.kind]()
+    return SigmaPointFilter(model, rule, x0_hat, P0)

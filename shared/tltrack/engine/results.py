@@ -1,0 +1,93 @@
+"""The ``results.json`` of an experiment: config, provenance, per-filter metrics and the PCRLB."""
+
+from __future__ import annotations
+
+import json
+import platform
+import subprocess
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import tltrack
+from tltrack.config import Config
+from tltrack.engine.montecarlo import FilterResult
+from tltrack.engine.pcrlb import pcrlb
+from tltrack.engine.scenario import PRIMARY, intensity, sensor, truth
+from tltrack.models.motion import motion_model
+
+SCHEMA_VERSION = 1
+
+
+def provenance() -> dict[str, Any]:
+    """Enough to tell which code, libraries and machine produced a result."""
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=5,
+            cwd=Path(__file__).parent,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        commit = ""
+    return {
+        "package_version": tltrack.__version__,
+        "git_commit": commit or "unknown",
+        "numpy_version": np.__version__,
+        "python_version": platform.python_version(),
+        "machine": f"{platform.machine()} {platform.processor() or platform.node()}".strip(),
+        "cpu_count": __import__("os").cpu_count(),
+    }
+
+
+def position_bounds(cfg: Config) -> dict[str, list[float]]:
+    """PCRLB of the primary alone, and with every source's raw data, averaged over the truths."""
+    model = motion_model(cfg)
+    runs = 1 if cfg.truth != "random" else cfg.runs
+    truths = np.stack([truth(cfg, r) for r in range(runs)])
+    P0 = np.diag(cfg.P0_diag)
+
+    def sensors(ids: list[str]) -> list[tuple[Any, Any]]:
+        return [(sensor(cfg, i), sensor(cfg, i).R(intensity(cfg, i))) for i in ids]
+
+    everyone = [PRIMARY, *(s.id for s in cfg.sources)]
+    return {
+        "primary": pcrlb(model, sensors([PRIMARY]), truths, P0).tolist(),
+        "with_source": pcrlb(model, sensors(everyone), truths, P0).tolist(),
+    }
+
+
+def assemble(
+    cfg: Config, results: dict[str, FilterResult], *, include_runs: bool = False
+) -> dict[str, Any]:
+    """The results document; per-run MSEs only on request (they grow with the run count)."""
+    filters = {}
+    for name, r in results.items():
+        d = asdict(r)
+        if not include_runs:
+            d.pop("run_mse")
+        filters[name] = d
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "provenance": provenance(),
+        "config": cfg.model_dump(mode="json"),
+        "filters": filters,
+        "pcrlb": position_bounds(cfg),
+    }
+
+
+def write(doc: dict[str, Any], out_dir: Path) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "results.json"
+    path.write_text(json.dumps(doc, indent=1, allow_nan=True))
+    return path
+
+
+def read(path: Path) -> dict[str, Any]:
+    doc = json.loads(Path(path).read_text())
+    if doc.get("schema_version") != SCHEMA_VERSION:
+        raise ValueError(f"{path}: unsupported results schema {doc.get('schema_version')!r}")
+    return doc

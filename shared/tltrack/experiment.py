@@ -1,0 +1,41 @@
+"""``tltrack experiment``: run the Monte-Carlo engine and write results.json and its figures."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from tltrack import plots
+from tltrack.config import Config
+from tltrack.engine import results
+from tltrack.engine.montecarlo import run_experiment, trace_run
+from tltrack.engine.scenario import truth
+
+
+def run_and_save(
+    cfg: Config,
+    filters: Sequence[str],
+    out: Path,
+    *,
+    workers: int | None = None,
+    batch_size: int | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """Run, then write ``out/results.json``, ``out/rmse.png`` and ``out/trajectory.png``."""
+    res = run_experiment(cfg, filters, workers=workers, batch_size=batch_size, progress=progress)
+    doc = results.assemble(cfg, res)
+    results.write(doc, out)
+    draw(doc, out)
+    return doc
+
+
+def draw(doc: dict[str, Any], out: Path) -> list[Path]:
+    """The figures of one results document (also what ``tltrack plot`` redraws)."""
+    cfg = Config.model_validate(doc["config"])
+    names = [n for n in doc["filters"] if "/" not in n]
+    tracks = trace_run(cfg, [n for n in names if not n.startswith("source-")], run=0)
+    return [
+        plots.rmse_vs_time(doc, out / "rmse.png"),
+        plots.trajectory(truth(cfg, 0), tracks, out / "trajectory.png"),
+    ]

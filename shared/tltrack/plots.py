@@ -1,0 +1,106 @@
+"""Figures in the style of the paper's: labelled axes with units, a legend, one idea per figure.
+
+Everything is drawn from a saved results document (or tracks), so ``tltrack plot results.json``
+redraws the figures without rerunning anything.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: the machines are headless
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+
+from tltrack.models.motion import POS  # noqa: E402
+
+_STYLE = {"pf": "tab:blue", "ukf": "tab:green", "ckf3": "tab:red", "ckf5": "tab:olive"}
+
+
+def _style(name: str) -> dict[str, Any]:
+    role, _, kind = name.rpartition("-")
+    kind = kind.split("/")[0]
+    ls = {"tl": "--", "source": ":", "fusion": "-."}.get(role, "-")
+    marker = "+" if role == "tl" else None
+    return {"color": _STYLE.get(kind, "black"), "linestyle": ls, "marker": marker, "markevery": 8}
+
+
+def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
+    """RMSE(k) of every filter, with the PCRLB as the physical limit (cf. the paper's Fig. 3/5)."""
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for name, r in doc["filters"].items():
+        k = np.arange(1, len(r["rmse_per_step"]) + 1)
+        ax.plot(k, r["rmse_per_step"], label=f"{name} ({r['rmse_overall']:.2f} m)", **_style(name))
+    for label, bound in doc.get("pcrlb", {}).items():
+        k = np.arange(1, len(bound) + 1)
+        ax.plot(k, bound, color="grey", lw=1, ls="-" if label == "primary" else "--",
+                label=f"PCRLB, {label.replace('_', ' ')}")
+    ax.set_xlabel("time step k [s]")
+    ax.set_ylabel("position RMSE [m]")
+    ax.set_title(title or _describe(doc))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=2)
+    return _save(fig, path)
+
+
+def trajectory(
+    truth: NDArray[np.float64], tracks: Mapping[str, NDArray[np.float64]], path: Path, title: str = ""
+) -> Path:
+    """The true path (x_0..x_K) and each filter's estimates for one run (cf. the paper's Fig. 4)."""
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    ax.plot(truth[:, POS[0]], truth[:, POS[1]], color="black", lw=2, label="truth")
+    ax.plot(truth[0, POS[0]], truth[0, POS[1]], "ko", label="start")
+    ax.plot(truth[-1, POS[0]], truth[-1, POS[1]], "kx", ms=9, label="end")
+    for name, xs in tracks.items():
+        ax.plot(xs[:, POS[0]], xs[:, POS[1]], lw=1, label=name, **_style(name))
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(title or "trajectory and estimates, run 0")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def curves(
+    x: Sequence[float],
+    series: Mapping[str, Sequence[float]],
+    path: Path,
+    *,
+    xlabel: str,
+    ylabel: str,
+    title: str,
+    reference: Mapping[str, Sequence[float]] | None = None,
+) -> Path:
+    """Measured curves against a swept parameter, with the paper's printed values as markers."""
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for name, ys in series.items():
+        ax.plot(x, ys, label=name, **{**_style(name), "marker": "o", "markevery": 1})
+    for name, ys in (reference or {}).items():
+        ax.plot(x, ys, ls="none", marker="s", mfc="none", color=_style(name)["color"],
+                label=f"{name} (paper)")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def _describe(doc: Mapping[str, Any]) -> str:
+    c = doc["config"]
+    return (f"scenario {c['scenario']}, preset {c['preset']}, truth {c['truth']}, "
+            f"I_p = {c['primary_intensity']:g}, N = {c['particles']}, {c['runs']} runs")
+
+
+def _save(fig: Any, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,220 @@
+"""``tltrack reproduce``: every figure and table of the seed's "Simulation Results", beside the
+numbers the paper prints, with the difference.
+
+The paper prints values at a few points only (RMSE at chosen k, overall RMSE at I_p = 4 and 8,
+Table 2); those are the reference column. Everything else is drawn from our runs.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tltrack import plots
+from tltrack.config import Config, make_config
+from tltrack.engine import results
+from tltrack.engine.montecarlo import FilterResult, run_experiment
+
+KF_FILTERS = ["ukf", "tl-ukf", "ckf3", "tl-ckf3", "ckf5", "tl-ckf5"]
+PF_FILTERS = ["pf", "tl-pf"]
+INTENSITIES = list(range(1, 9))
+PARTICLES = [3000, 6000, 9000, 12000]
+
+#: Table 2 of the seed: (RMSE isolated, ms isolated, RMSE TL, ms TL) at I_p = 4, Scenario 2.
+TABLE2: dict[tuple[str, int | None], tuple[float, float, float, float]] = {
+    ("ckf3", None): (18.0973, 0.154, 15.8815, 0.188),
+    ("ukf", None): (17.9451, 0.165, 15.4299, 0.206),
+    ("ckf5", None): (17.9178, 0.225, 15.2728, 0.297),
+    ("pf", 3000): (16.9530, 0.867, 15.2341, 0.931),
+    ("pf", 6000): (16.7473, 1.902, 14.3359, 2.020),
+    ("pf", 9000): (16.6988, 2.957, 14.1443, 3.167),
+    ("pf", 12000): (16.6630, 3.367, 14.0746, 3.569),
+}
+
+#: RMSE(k) values the text quotes: (scenario, filter, k) -> metres (N = 6000, I_p = 4).
+RMSE_AT_K: dict[tuple[str, str, int], float] = {
+    ("cv", "tl-pf", 52): 4.28,
+    ("cv", "pf", 52): 7.37,
+    ("cv", "tl-ukf", 52): 10.13,
+    ("cv", "tl-ckf3", 52): 11.28,
+    ("ct", "tl-pf", 10): 13.10,
+    ("ct", "tl-ckf3", 10): 15.72,
+    ("ct", "tl-ukf", 10): 14.35,
+    ("ct", "tl-pf", 47): 7.79,
+    ("ct", "tl-ukf", 47): 13.75,
+    ("ct", "tl-pf", 48): 7.85,
+    ("ct", "pf", 48): 9.73,
+    ("ct", "tl-pf", 75): 14.38,
+    ("ct", "pf", 75): 17.34,
+}
+
+#: Overall RMSE against I_p quoted in the text (N = 6000): (filter, I_p) -> metres.
+RMSE_AT_IP: dict[tuple[str, int], float] = {
+    ("pf", 4): 16.74,
+    ("tl-pf", 4): 14.33,
+    ("pf", 8): 23.06,
+    ("tl-pf", 8): 17.45,
+    ("tl-ckf5", 8): 17.45 + 1.24,
+}
+
+#: Delta RMSE against Delta I quoted in the text: (kind, Delta I) -> metres.
+DELTA_AT_DI: dict[tuple[str, int], float] = {
+    ("pf", 3): 2.41,
+    ("ckf3", 3): 2.21,
+    ("pf", 7): 5.61,
+    ("ckf5", 7): 6.06,
+}
+
+
+@dataclass(frozen=True)
+class Job:
+    label: str
+    cfg: Config
+    filters: list[str]
+
+
+def jobs(base: Config) -> list[Job]:
+    """Every Monte-Carlo experiment the section needs, each run once."""
+    ct = base.with_(scenario="ct", particles=6000)
+    out = [Job("s1", base.with_(scenario="cv", particles=6000, primary_intensity=4),
+               PF_FILTERS + KF_FILTERS[:4])]
+    out += [Job(f"s2_ip{i}", ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
+            for i in INTENSITIES]
+    out += [Job(f"s2_n{n}", ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
+            for n in PARTICLES if n != 6000]
+    return out
+
+
+def run_all(
+    base: Config,
+    out: Path,
+    *,
+    workers: int | None = None,
+    progress: Callable[[str, int], None] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """Run every job (``progress(label, runs_done)``), saving each one's results.json."""
+    docs = {}
+    for job in jobs(base):
+        t0 = time.perf_counter()
+        res: dict[str, FilterResult] = run_experiment(
+            job.cfg, job.filters, workers=workers,
+            progress=(lambda n, j=job.label: progress(j, n)) if progress else None,
+        )
+        doc = results.assemble(job.cfg, res)
+        doc["wall_s"] = time.perf_counter() - t0
+        results.write(doc, out / job.label)
+        docs[job.label] = doc
+    return docs
+
+
+def _fmt(x: float | None, digits: int = 2) -> str:
+    return "–" if x is None else f"{x:.{digits}f}"
+
+
+def _row(cells: Iterable[Any]) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
+    """Figures plus ``report.md``: each printed number beside ours and the difference."""
+    f = {label: d["filters"] for label, d in docs.items()}
+    s2 = f["s2_ip4"]
+    cfg = docs["s2_ip4"]["config"]
+    runs = cfg["runs"]
+    lines = [
+        "# Reproduction of the seed's Simulation Results",
+        "",
+        f"{runs} Monte-Carlo runs per point (the paper: 10,000); preset `{cfg['preset']}`, "
+        f"truth `{cfg['truth']}`, seed {cfg['seed']}. Difference = ours - paper.",
+        "",
+        "## Table 2 (Scenario 2, I_p = 4)",
+        "",
+        _row(["filter", "points", "RMSE iso (paper)", "RMSE iso (ours)", "diff",
+              "RMSE TL (paper)", "RMSE TL (ours)", "diff", "ms iso (paper / ours)",
+              "ms TL (paper / ours)", "lost iso / TL"]),
+        _row(["---"] * 11),
+    ]
+    for (kind, n), (r_iso, t_iso, r_tl, t_tl) in TABLE2.items():
+        res = f["s2_ip4"] if n in (None, 6000) else f[f"s2_n{n}"]
+        iso, tl = res[kind], res[f"tl-{kind}"]
+        points = n or {"ckf3": 10, "ukf": 11, "ckf5": 51}[kind]
+        lines.append(_row([
+            kind.upper(), points, r_iso, _fmt(iso["rmse_overall"]),
+            _fmt(iso["rmse_overall"] - r_iso), r_tl, _fmt(tl["rmse_overall"]),
+            _fmt(tl["rmse_overall"] - r_tl),
+            f"{t_iso} / {_fmt(iso['ms_per_step'], 3)}", f"{t_tl} / {_fmt(tl['ms_per_step'], 3)}",
+            f"{iso['lost_fraction']:.1%} / {tl['lost_fraction']:.1%}",
+        ]))
+    lines += ["", "## RMSE(k) at the steps the text quotes (N = 6000, I_p = 4)", "",
+              _row(["scenario", "filter", "k", "paper", "ours", "diff"]), _row(["---"] * 6)]
+    for (scen, name, k), ref in RMSE_AT_K.items():
+        ours = (f["s1"] if scen == "cv" else s2)[name]["rmse_per_step"][k - 1]
+        lines.append(_row([scen, name, k, ref, _fmt(ours), _fmt(ours - ref)]))
+    lines += ["", "## Overall RMSE against I_p (N = 6000)", "",
+              _row(["I_p", *(n for n in PF_FILTERS + KF_FILTERS)]), _row(["---"] * 9)]
+    for i in INTENSITIES:
+        row = [f"{i}"]
+        for name in PF_FILTERS + KF_FILTERS:
+            ours = f[f"s2_ip{i}"][name]["rmse_overall"]
+            ref = RMSE_AT_IP.get((name, i))
+            row.append(_fmt(ours) + ("" if ref is None else f" (paper {ref:.2f})"))
+        lines.append(_row(row))
+    lines += ["", "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s", "",
+              _row(["Delta I", "pf", "ukf", "ckf3", "ckf5"]), _row(["---"] * 5)]
+    kinds = ["pf", "ukf", "ckf3", "ckf5"]
+    deltas: dict[str, list[float]] = {k: [] for k in kinds}
+    for i in INTENSITIES:
+        row = [f"{i - 1}"]
+        for kind in kinds:
+            d = f[f"s2_ip{i}"][kind]["rmse_overall"] - f[f"s2_ip{i}"][f"tl-{kind}"]["rmse_overall"]
+            deltas[kind].append(d)
+            ref = DELTA_AT_DI.get((kind, i - 1))
+            row.append(_fmt(d) + ("" if ref is None else f" (paper {ref:.2f})"))
+        lines.append(_row(row))
+    lines += ["", "## Share of runs that lost track (final error > threshold)", "",
+              _row(["job", *(n for n in PF_FILTERS + KF_FILTERS)]), _row(["---"] * 9)]
+    for label, res in f.items():
+        lines.append(_row([label, *(f"{res[n]['lost_fraction']:.1%}" if n in res else "–"
+                                    for n in PF_FILTERS + KF_FILTERS)]))
+    wall = sum(d.get("wall_s", 0.0) for d in docs.values())
+    lines += ["", f"Wall time of all jobs: {wall / 60:.1f} min.", "",
+              "Figures: ![s1](fig_s1_rmse.png) ![s2](fig_s2_rmse.png) ![ip](fig_rmse_vs_ip.png) "
+              "![delta](fig_delta_rmse.png) ![n](fig_rmse_time_vs_n.png)", ""]
+
+    plots.rmse_vs_time(docs["s1"], out / "fig_s1_rmse.png", "Scenario 1: RMSE against time")
+    plots.rmse_vs_time(docs["s2_ip4"], out / "fig_s2_rmse.png", "Scenario 2: RMSE against time")
+    plots.curves(
+        INTENSITIES,
+        {n: [f[f"s2_ip{i}"][n]["rmse_overall"] for i in INTENSITIES] for n in PF_FILTERS + KF_FILTERS},
+        out / "fig_rmse_vs_ip.png", xlabel="primary noise intensity I_p", ylabel="overall RMSE [m]",
+        title="Scenario 2: overall RMSE against I_p",
+        reference={n: [RMSE_AT_IP.get((n, i), float("nan")) for i in INTENSITIES]
+                   for n in ("pf", "tl-pf", "tl-ckf5")},
+    )
+    plots.curves(
+        [i - 1 for i in INTENSITIES], deltas, out / "fig_delta_rmse.png",
+        xlabel="Delta I_w = |I_p - I_s|", ylabel="Delta RMSE [m]",
+        title="Scenario 2: RMSE gain of transfer against Delta I",
+        reference={k: [DELTA_AT_DI.get((k, i - 1), float("nan")) for i in INTENSITIES]
+                   for k in kinds},
+    )
+    by_n = {n: (s2 if n == 6000 else f[f"s2_n{n}"]) for n in PARTICLES}
+    plots.curves(
+        PARTICLES, {n: [by_n[p][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
+        out / "fig_rmse_time_vs_n.png", xlabel="particles N_s", ylabel="overall RMSE [m]",
+        title="Scenario 2: RMSE against N_s (ms per step in report.md)",
+        reference={"pf": [TABLE2["pf", p][0] for p in PARTICLES],
+                   "tl-pf": [TABLE2["pf", p][2] for p in PARTICLES]},
+    )
+    path = out / "report.md"
+    path.write_text("\n".join(lines))
+    (out / "summary.json").write_text(json.dumps({k: d["filters"] for k, d in docs.items()}))
+    return path
+
+
+def base_config(preset: str, truth: str, runs: int, seed: int) -> Config:
+    return make_config(preset=preset, truth=truth, runs=runs, seed=seed)
