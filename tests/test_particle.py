@@ -1,7 +1,5 @@
 import numpy as np
-import pytest
 from doubles import PositionSensor, cv_model, kalman
-
 from tltrack.engine.streams import streams
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices

@@ -88,7 +88,9 @@ class Config(BaseModel):
     )
     primary_intensity: float = Field(4.0, gt=0, allow_inf_nan=False)
     primary_position: tuple[float, float] = (0.0, 0.0)
-    sources: list[SourceSpec] = Field(default_factory=lambda: [SourceSpec()], min_length=1)
+    sources: list[SourceSpec] = Field(
+        default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
+    )
     truth: TruthMode = "fixed"
     truth_seed: int = Field(0, ge=0)
     seed: int = Field(0, ge=0)

@@ -100,9 +100,13 @@ def run_all(
     docs = {}
     for job in jobs(base):
         t0 = time.perf_counter()
+
+        def advance(n: int, label: str = job.label) -> None:
+            if progress:
+                progress(label, n)
+
         res: dict[str, FilterResult] = run_experiment(
-            job.cfg, job.filters, workers=workers,
-            progress=(lambda n, j=job.label: progress(j, n)) if progress else None,
+            job.cfg, job.filters, workers=workers, progress=advance
         )
         doc = results.assemble(job.cfg, res)
         doc["wall_s"] = time.perf_counter() - t0
@@ -160,8 +164,8 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         row = [f"{i}"]
         for name in PF_FILTERS + KF_FILTERS:
             ours = f[f"s2_ip{i}"][name]["rmse_overall"]
-            ref = RMSE_AT_IP.get((name, i))
-            row.append(_fmt(ours) + ("" if ref is None else f" (paper {ref:.2f})"))
+            ref_ip = RMSE_AT_IP.get((name, i))
+            row.append(_fmt(ours) + ("" if ref_ip is None else f" (paper {ref_ip:.2f})"))
         lines.append(_row(row))
     lines += ["", "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s", "",
               _row(["Delta I", "pf", "ukf", "ckf3", "ckf5"]), _row(["---"] * 5)]
@@ -172,8 +176,8 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         for kind in kinds:
             d = f[f"s2_ip{i}"][kind]["rmse_overall"] - f[f"s2_ip{i}"][f"tl-{kind}"]["rmse_overall"]
             deltas[kind].append(d)
-            ref = DELTA_AT_DI.get((kind, i - 1))
-            row.append(_fmt(d) + ("" if ref is None else f" (paper {ref:.2f})"))
+            ref_d = DELTA_AT_DI.get((kind, i - 1))
+            row.append(_fmt(d) + ("" if ref_d is None else f" (paper {ref_d:.2f})"))
         lines.append(_row(row))
     lines += ["", "## Share of runs that lost track (final error > threshold)", "",
               _row(["job", *(n for n in PF_FILTERS + KF_FILTERS)]), _row(["---"] * 9)]

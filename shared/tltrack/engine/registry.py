@@ -55,7 +55,7 @@ def parse(name: str) -> FilterSpec:
         role, kind = _PREFIX[prefix], rest
     if kind not in KINDS or (role == "fusion" and kind != "pf"):
         raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
-    return FilterSpec(name, kind, role)  # type: ignore[arg-type]
+    return FilterSpec(name, kind, role)
 
 
 def all_names() -> list[str]:

@@ -29,9 +29,15 @@ POS = (0, 2)
 class MotionModel(Protocol):
     """What a filter needs to know about the dynamics."""
 
-    n: int
-    Q: Array
-    Q_sqrt: Array
+    @property
+    def n(self) -> int: ...
+
+    @property
+    def Q(self) -> Array: ...
+
+    @property
+    def Q_sqrt(self) -> Array:
+        """L with L @ L.T == Q_v; L has as many columns as Q_v has rank."""
 
     def f(self, x: Array) -> Array: ...
 

@@ -1,0 +1,47 @@
+# Two commands do everything on a fresh machine: `make demo` and `make test`.
+PY      ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+PYTEST  := $(BIN)/pytest
+
+.PHONY: demo test check lint bench reproduce zenohd clean
+
+$(STAMP): pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+## The live dual tracker over loopback Zenoh: router + 4 services, one episode, the scorer's summary.
+demo: $(STAMP)
+	$(BIN)/tltrack demo
+
+## Every test: unit, integration over real Zenoh, container, browser and fault tests; ruff and mypy.
+test: $(STAMP) lint
+	$(PYTEST) -q -ra
+
+## The fast everyday subset: lint, types and unit tests.
+check: $(STAMP) lint
+	$(PYTEST) -q -ra -m "not slow and not integration and not docker"
+
+lint: $(STAMP)
+	$(BIN)/ruff check shared services tests
+	$(BIN)/ruff format --check shared services tests
+	$(BIN)/mypy
+
+## Benchmarks (not tests): filter step times and speedups.
+bench: $(STAMP)
+	$(BIN)/tltrack bench --json out/bench.json
+
+## The paper's figures and tables; RUNS=10000 is the paper's precision.
+RUNS ?= 500
+reproduce: $(STAMP)
+	$(BIN)/tltrack reproduce --runs $(RUNS) --out out/reproduce
+
+## A stock zenohd on PATH enables the zenohd interoperability test (~7.5 min to build).
+zenohd:
+	bash scripts/build_zenohd.sh
+
+clean:
+	rm -rf $(VENV) out build .pytest_cache .mypy_cache .ruff_cache
