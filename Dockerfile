@@ -39,7 +39,7 @@ ENV VIRTUAL_ENV=/opt/venv \
     PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     MPLBACKEND=Agg \
-    MPLCONFIGDIR=/tmp/matplotlib \
+    MPLCONFIGDIR=/tmp/matplotlib
 
 # --no-log-init: no sparse lastlog/faillog entry for a high uid in the layer.
 RUN groupadd --gid "${GID}" tltrack \

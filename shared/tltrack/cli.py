@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -148,3 +149,66 @@ def reproduce(
         docs = rep.run_all(base, out, workers=workers,
                            progress=lambda label, n: bar.advance(tasks[label], n))
     console.print(f"wrote {rep.report(docs, out)}")
+
+
+@app.command()
+def router(
+    listen: Annotated[list[str] | None, typer.Option(help="endpoint(s) to listen on")] = None,
+) -> None:
+    """Run a Zenoh router (the Python package in router mode) until Ctrl-C or SIGTERM.
+
+    Example: `tltrack router --listen tcp/0.0.0.0:7447`
+    """
+    from tltrack.transport import ZenohSettings, run_router
+
+    run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings())
+
+
+@app.command(
+    epilog="Examples:\n\n    tltrack demo\n\n    tltrack demo --steps 50 --particles 2000 "
+    "--json /tmp/d.json\n\n    tltrack demo --realtime"
+)
+def demo(
+    steps: Annotated[int, typer.Option(help="steps K of the episode")] = 100,
+    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the summary here")] = None,
+    pace: Annotated[float, typer.Option(help="steps per second")] = 20.0,
+    realtime: Annotated[bool, typer.Option(help="pace at one step per Ts")] = False,
+    preset: Annotated[str, typer.Option(help="paper or arasaratnam-haykin")] = "arasaratnam-haykin",
+    truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "fixed",
+    seed: Annotated[int, typer.Option(help="master seed")] = 0,
+    out: Annotated[Path, typer.Option(help="logs and the scorer's database")] = Path("out/demo"),
+) -> None:
+    """Start the router and the four services on loopback, run one episode, print the summary."""
+    from tltrack import demo as d
+    from tltrack.summary import print_summary
+
+    endpoint = f"tcp/127.0.0.1:{d.free_port()}"
+    db = out / "scorer.sqlite"
+    for suffix in ("", "-wal", "-shm"):
+        Path(f"{db}{suffix}").unlink(missing_ok=True)
+    console.print(f"router {endpoint}; logs in {out / 'logs'}")
+    with d.Stack(endpoint, out / "logs") as stack:
+        stack.start_router()
+        stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
+        stack.start_service("primary_tracker")
+        stack.start_service("source_tracker")
+        stack.start_service("sensor_sim",
+                            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed))
+        budget = steps * (1.0 if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
+        with progress_bar(steps, "episode") as bar:
+            task = bar.add_task("episode", total=None)
+            rc = stack.wait("sensor_sim", budget)
+            bar.update(task, completed=steps, total=steps)
+        if rc != 0:
+            console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
+            raise typer.Exit(1)
+        summary = d.wait_for_scored(endpoint, 1, 120)
+    if summary is None:
+        console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
+        raise typer.Exit(1)
+    print_summary(summary)
+    if json_out:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1))
+        console.print(f"wrote {json_out}")
