@@ -18,7 +18,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, model_validator
 
 Scenario = Literal["cv", "ct"]
 Preset = Literal["paper", "arasaratnam-haykin"]
@@ -65,7 +65,7 @@ class SourceSpec(BaseModel):
 
     id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$")
     intensity: float = Field(1.0, gt=0, allow_inf_nan=False)
-    position: tuple[float, float] = (0.0, 0.0)
+    position: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
     fault: SourceFault = "none"
 
 
@@ -87,7 +87,7 @@ class Config(BaseModel):
         math.sqrt(10.0) * 1e-3, gt=0, allow_inf_nan=False, description="bearing std [rad]"
     )
     primary_intensity: float = Field(4.0, gt=0, allow_inf_nan=False)
-    primary_position: tuple[float, float] = (0.0, 0.0)
+    primary_position: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
     sources: list[SourceSpec] = Field(
         default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
     )
@@ -96,7 +96,7 @@ class Config(BaseModel):
     seed: int = Field(0, ge=0)
     particles: int = Field(6000, ge=10, le=10_000_000)
     runs: int = Field(100, ge=1)
-    kappa: float = Field(2.0, description="UKF scaling parameter")
+    kappa: float = Field(2.0, allow_inf_nan=False, description="UKF scaling parameter")
     lost_threshold_m: float = Field(100.0, gt=0, allow_inf_nan=False)
 
     @model_validator(mode="before")

@@ -1,0 +1,3 @@
+from services.primary_tracker.tracker import main
+
+main()

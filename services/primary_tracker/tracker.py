@@ -1,0 +1,201 @@
+"""Algorithm 2 as a service.
+
+Step k needs z_k and, from every source of the episode, the transfer with ``k_apply == k``. The
+primary waits for missing transfers at most ``deadline_ms`` after z_k is ready, and not at all for
+a source whose liveliness token is gone; then it takes the step with what it has (an isolated step
+if nothing). ``lockstep`` waits without a deadline, for tests and exact replays.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from tltrack import keys
+from tltrack.filters.base import Estimate
+from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.service import Service, load_settings, setup_logging
+from tltrack.tracking import PrimaryEpisode, StepQueue, warm_up
+from tltrack.transport import Received, ZenohSettings, decode_received
+
+log = logging.getLogger("primary_tracker")
+NAME = "primary_tracker"
+SOURCE_TRACKER = "source_tracker"
+
+
+class Settings(BaseSettings):
+    """Environment ``TLTRACK_PRIMARY_<FIELD>`` or ``--<field>``."""
+
+    model_config = SettingsConfigDict(env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME)
+
+    filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
+    lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
+    max_episodes: int = Field(4, ge=1)
+    log_level: str = "INFO"
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+
+@dataclass
+class Episode:
+    start: EpisodeStart
+    tracker: PrimaryEpisode
+    sources: list[str]
+    steps: StepQueue[Measurement] = field(default_factory=StepQueue)
+    transfers: dict[int, dict[str, Transfer]] = field(default_factory=dict)
+    ready_since: float | None = None  # when z_{next_k} was first ready (monotonic)
+
+
+class PrimaryTracker:
+    def __init__(self, settings: Settings, svc: Service) -> None:
+        self.s, self.svc = settings, svc
+        self.episodes: dict[str, Episode] = {}
+        self.alive: set[str] = set()  # source ids whose tracker token is up
+        self.seen: set[str] = set()  # ... or ever was
+
+    # ---- inputs ---------------------------------------------------------------------------
+
+    def handle(self, item: Received) -> None:
+        try:
+            info = keys.parse(item.key)
+        except ValueError:
+            self.svc.rejects.add(item.key, "bad_key")
+            return
+        if info.kind == "alive" and info.source is not None:
+            if info.service == SOURCE_TRACKER:
+                self._on_liveliness(info.source, item.is_put)
+        elif info.kind == "episode":
+            self._on_episode(item)
+        elif info.kind == "primary_meas" and info.episode is not None:
+            z = decode_received(item, Measurement, self.svc.rejects)
+            if z is not None:
+                self._on_measurement(info.episode, item.key, z)
+        elif info.kind == "transfer" and info.episode is not None and info.source is not None:
+            t = decode_received(item, Transfer, self.svc.rejects)
+            if t is not None:
+                self._on_transfer(info.episode, info.source, item.key, t)
+
+    def _on_liveliness(self, sid: str, up: bool) -> None:
+        log.info("source %s %s", sid, "alive" if up else "gone")
+        if up:
+            self.alive.add(sid)
+            self.seen.add(sid)
+        else:
+            self.alive.discard(sid)
+
+    def _on_episode(self, item: Received) -> None:
+        end = decode_received(item, EpisodeEnd, None)
+        if end is not None:
+            self.episodes.pop(end.episode, None)
+            return
+        start = decode_received(item, EpisodeStart, self.svc.rejects)
+        if start is None or start.episode in self.episodes:
+            return
+        cfg = start.parsed_config()
+        while len(self.episodes) >= self.s.max_episodes:
+            self.episodes.pop(next(iter(self.episodes)))
+        self.episodes[start.episode] = Episode(
+            start, PrimaryEpisode(cfg, start.run, self.s.filter), [s.id for s in cfg.sources]
+        )
+        log.info("episode %s (run %d): tl-%s and %s", start.episode, start.run, self.s.filter,
+                 self.s.filter)
+
+    def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
+        ep = self.episodes.get(e)
+        if ep is None:
+            self.svc.count("measurement_without_episode")
+            return
+        verdict = ep.steps.offer(z.k, z)
+        if verdict != "accepted":
+            self.svc.rejects.add(key, verdict)
+
+    def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
+        ep = self.episodes.get(e)
+        if ep is None or sid not in ep.sources:
+            self.svc.rejects.add(key, "unexpected_transfer")
+            return
+        if t.k_apply < ep.steps.next_k:
+            self.svc.rejects.add(key, "late_transfer")
+            return
+        if t.k_apply >= ep.steps.next_k + ep.steps.window:
+            self.svc.rejects.add(key, "too_far")
+            return
+        slot = ep.transfers.setdefault(t.k_apply, {})
+        if sid in slot:
+            self.svc.rejects.add(key, "duplicate")
+            return
+        slot[sid] = t
+
+    # ---- stepping -------------------------------------------------------------------------
+
+    def advance(self) -> float | None:
+        """Take every step that can be taken; the seconds until the next deadline, if any."""
+        wait: float | None = None
+        for e, ep in list(self.episodes.items()):
+            while (z := ep.steps.ready()) is not None:
+                now = time.monotonic()
+                if ep.ready_since is None:
+                    ep.ready_since = now
+                have = ep.transfers.get(z.k, {}) if z.k > 1 else {}
+                waiting = [sid for sid in ep.sources if sid not in have and self._worth_waiting(sid)]
+                if waiting and z.k > 1 and not self.s.lockstep:
+                    left = ep.ready_since + self.s.deadline_ms / 1e3 - now
+                    if left > 0:
+                        wait = left if wait is None else min(wait, left)
+                        break
+                elif waiting and z.k > 1:
+                    break  # lock-step: wait as long as the source lives
+                ep.steps.release()
+                ep.transfers.pop(z.k, None)
+                ep.ready_since = None
+                self._step(e, ep, z, have)
+        return wait
+
+    def _worth_waiting(self, sid: str) -> bool:
+        """A source whose token went away is not waited for; an unseen one is (it may be late)."""
+        return sid in self.alive or sid not in self.seen
+
+    def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
+        t0 = time.perf_counter()
+        tl, iso = ep.tracker.step(z, transfers)
+        step_ms = (time.perf_counter() - t0) * 1e3
+        used = bool(transfers)
+        self._publish(e, "tl", ep.tracker.tl_name, z, tl, used, step_ms)
+        self._publish(e, "isolated", ep.tracker.iso_name, z, iso, False, step_ms)
+        self.svc.count("steps")
+        self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
+
+    def _publish(self, e: str, role: str, name: str, z: Measurement, est: Estimate, used: bool,
+                 step_ms: float) -> None:
+        self.svc.publish(keys.primary_estimate(role, e), EstimateMsg(
+            episode=e, sender=keys.PRIMARY, k=z.k, t_sensor=z.t_sensor, filter=name,
+            x=est.mean[0], P=est.cov[0], transfer_used=used, t_sent=time.time(), step_ms=step_ms,
+        ))
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = load_settings(Settings, argv)
+    setup_logging(settings.log_level)
+    warm_up(settings.filter)
+    with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
+        inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)
+        liveliness = svc.subscribe(keys.alive(keys.source_operator(keys.ANY), SOURCE_TRACKER),
+                                   liveliness=True)
+        svc.announce()
+        tracker = PrimaryTracker(settings, svc)
+        wait: float | None = None
+        while not svc.stop.is_set():
+            for item in liveliness.drain():
+                tracker.handle(item)
+            # while a step waits for a transfer, poll liveliness every 20 ms
+            for item in svc.drain(inbox, timeout=0.2 if wait is None else min(wait, 0.02)):
+                tracker.handle(item)
+            for item in liveliness.drain():
+                tracker.handle(item)
+            wait = tracker.advance()
+            svc.publish_stats()

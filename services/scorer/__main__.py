@@ -1,0 +1,3 @@
+from services.scorer.scorer import main
+
+main()

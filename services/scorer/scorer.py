@@ -1,0 +1,148 @@
+"""The scorer service: subscribe to the truth and every estimate, persist, summarise, answer.
+
+An episode is scored once it has ended and every filter has reported step K, or once no estimate
+for it has arrived for ``grace_s`` after its end; then the summary table is printed. The current
+summary (all episodes) answers gets on ``tltrack/scorer/summary`` as JSON.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from services.scorer.store import Store
+from services.scorer.summary import summarize
+from tltrack import keys
+from tltrack.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.service import Service, load_settings, setup_logging
+from tltrack.summary import print_summary
+from tltrack.transport import Queryable, Received, ZenohSettings, decode_received
+
+log = logging.getLogger("scorer")
+NAME = "scorer"
+
+
+class Settings(BaseSettings):
+    """Environment ``TLTRACK_SCORER_<FIELD>`` or ``--<field>``."""
+
+    model_config = SettingsConfigDict(env_prefix="TLTRACK_SCORER_", cli_prog_name=NAME)
+
+    db: Path = Field(Path("tltrack-scorer.sqlite"), description="SQLite file")
+    grace_s: float = Field(5.0, gt=0, description="wait for late estimates after an episode")
+    log_level: str = "INFO"
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+
+class Scorer:
+    def __init__(self, settings: Settings, svc: Service, store: Store) -> None:
+        self.s, self.svc, self.store = settings, svc, store
+        self.K: dict[str, int] = {}
+        self.ended: dict[str, float] = {}  # episode -> monotonic time of its end
+        self.last_seen: dict[str, float] = {}
+        self.counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
+        self.scored: set[str] = {e for (e,) in store.rows(
+            "SELECT episode FROM episodes WHERE ended IS NOT NULL")}
+        self._summary = b"{}"
+        self._lock = threading.Lock()
+        self.refresh()
+
+    def answer(self, _params: dict[str, str]) -> bytes:
+        with self._lock:
+            return self._summary
+
+    def refresh(self) -> None:
+        summary = summarize(self.store)
+        for ep in summary["episodes"]:
+            ep["scored"] = ep["episode"] in self.scored
+        with self._lock:
+            self._summary = json.dumps(summary).encode()
+
+    def handle(self, item: Received) -> None:
+        try:
+            info = keys.parse(item.key)
+        except ValueError:
+            self.svc.rejects.add(item.key, "bad_key")
+            return
+        if info.kind == "episode":
+            self._on_episode(item)
+        elif info.kind == "truth":
+            truth = decode_received(item, Truth, self.svc.rejects)
+            if truth is not None:
+                self.store.truth(truth)
+        elif info.kind in ("source_estimate", "primary_estimate"):
+            est = decode_received(item, EstimateMsg, self.svc.rejects)
+            if est is not None and self.store.estimate(est, item.t_recv):
+                self.counts[est.episode][est.filter] += 1
+                self.last_seen[est.episode] = time.monotonic()
+        elif info.kind == "stats" and info.operator and info.service:
+            self._on_stats(item, info.operator, info.service)
+
+    def _on_episode(self, item: Received) -> None:
+        end = decode_received(item, EpisodeEnd, None)
+        if end is not None:
+            self.store.episode_end(end)
+            self.ended[end.episode] = time.monotonic()
+            return
+        start = decode_received(item, EpisodeStart, self.svc.rejects)
+        if start is not None:
+            self.store.episode_start(start)
+            self.K[start.episode] = start.K
+
+    def _on_stats(self, item: Received, operator: str, service: str) -> None:
+        try:
+            if len(item.payload) > MAX_PAYLOAD_BYTES:
+                raise ValueError("too large")
+            stats = json.loads(item.payload)
+            if not isinstance(stats, dict):
+                raise ValueError("not an object")
+        except ValueError:
+            self.svc.rejects.add(item.key, "bad_stats")
+            return
+        self.store.service_stats(operator, service, time.time(), stats)
+
+    def score_finished(self) -> None:
+        """Score every ended episode that is complete, or quiet for ``grace_s``."""
+        now = time.monotonic()
+        for e, t_end in list(self.ended.items()):
+            K, counts = self.K.get(e), self.counts.get(e, {})
+            complete = K is not None and counts and all(n >= K for n in counts.values())
+            quiet = now - max(t_end, self.last_seen.get(e, t_end)) > self.s.grace_s
+            if complete or quiet:
+                del self.ended[e]
+                self.scored.add(e)
+                self.store.commit()
+                self.refresh()
+                print_summary(summarize(self.store, [e]))
+                log.info("episode %s scored", e)
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = load_settings(Settings, argv)
+    setup_logging(settings.log_level)
+    store = Store(settings.db)
+    try:
+        with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
+            scorer = Scorer(settings, svc, store)
+            inbox = svc.subscribe(keys.EPISODES, keys.TRUTHS, keys.SOURCE_ESTIMATES,
+                                  keys.PRIMARY_ESTIMATES, f"{keys.ROOT}/**/stats/*")
+            with Queryable(svc.session, keys.SCORER_SUMMARY, scorer.answer):
+                svc.announce()
+                last_refresh = time.monotonic()
+                while not svc.stop.is_set():
+                    for item in svc.drain(inbox, timeout=0.2):
+                        scorer.handle(item)
+                    store.commit()
+                    scorer.score_finished()
+                    if time.monotonic() - last_refresh > 1.0:
+                        scorer.refresh()
+                        last_refresh = time.monotonic()
+                    svc.publish_stats()
+    finally:
+        store.close()

@@ -1,0 +1,82 @@
+"""RMSE, latency, transfer use, gaps and rejected messages, computed from the store alone.
+
+RMSE follows the paper: RMSE(k) = sqrt(mean over episodes of the squared position error at k),
+overall = mean over k. Latency is end to end: sensor timestamp to the estimate's arrival here
+(meaningful on one host; across hosts it needs synchronised clocks).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from services.scorer.store import Store
+from tltrack.models.motion import POS
+
+
+def _percentiles(ms: list[float]) -> dict[str, float | None]:
+    if not ms:
+        return {"p50": None, "p95": None, "p99": None}
+    p = np.percentile(ms, [50, 95, 99])
+    return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}
+
+
+def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]:
+    """The summary over ``episodes`` (default: all in the store)."""
+    eps = store.rows("SELECT episode, run, K, ended, end_reason FROM episodes ORDER BY started")
+    if episodes is not None:
+        eps = [e for e in eps if e[0] in episodes]
+    names = [e[0] for e in eps]
+    K_of = {e[0]: e[2] for e in eps}
+    truth = {(ep, k): np.array(json.loads(x))
+             for ep, k, x in store.rows("SELECT episode, k, x FROM truth")}
+    sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
+    latency: dict[str, list[float]] = defaultdict(list)
+    used: dict[str, int] = defaultdict(int)
+    seen: dict[str, set[tuple[str, int]]] = defaultdict(set)
+    for ep, name, k, x, tu, t_sensor, t_recv in store.rows(
+        "SELECT episode, filter, k, x, transfer_used, t_sensor, t_recv FROM estimates"
+    ):
+        if ep not in K_of:
+            continue
+        seen[name].add((ep, k))
+        latency[name].append((t_recv - t_sensor) * 1e3)
+        used[name] += tu
+        if (ep, k) in truth:
+            d = np.array(json.loads(x)) - truth[ep, k]
+            sq[name][k].append(float(d[POS[0]] ** 2 + d[POS[1]] ** 2))
+    filters = {}
+    for name in sorted(seen):
+        steps = sorted(sq[name])
+        per_step = [float(np.sqrt(np.mean(sq[name][k]))) for k in steps]
+        expected = sum(K_of[e] for e in names)
+        filters[name] = {
+            "rmse_overall": float(np.mean(per_step)) if per_step else None,
+            "rmse_per_step": per_step,
+            "steps": len(seen[name]),
+            "gaps": expected - len(seen[name]),
+            "steps_with_transfer": used[name],
+            "latency_ms": _percentiles(latency[name]),
+        }
+    everything = [v for lst in latency.values() for v in lst]
+    rejected: dict[str, dict[str, int]] = {}
+    dropped = 0
+    for operator, service, _t, stats in store.rows("SELECT * FROM service_stats"):
+        s = json.loads(stats)
+        rejected[f"{operator}/{service}"] = s.get("rejected", {}).get("by_reason", {})
+        dropped += int(s.get("dropped", 0))
+    return {
+        "episodes": [{"episode": e, "run": r, "K": K, "complete": reason == "complete"}
+                     for e, r, K, _ended, reason in eps],
+        "filters": filters,
+        "latency_ms": _percentiles(everything),
+        "messages": {
+            "rejected": rejected,
+            "rejected_total": sum(sum(v.values()) for v in rejected.values()),
+            "dropped": dropped,
+            "missing_estimates": sum(f["gaps"] for f in filters.values()),
+        },
+    }

@@ -1,0 +1,3 @@
+from services.sensor_sim.simulator import main
+
+main()

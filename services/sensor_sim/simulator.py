@@ -1,0 +1,158 @@
+"""Publishes episodes: EpisodeStart, then for k = 1..K the truth (referee only) and each sensor's
+measurement on its owner's key, then EpisodeEnd.
+
+The truth and measurements of episode i are run ``first_run + i`` of ``tltrack experiment`` with
+the same configuration: the same per-run random streams, so trackers can replay it exactly.
+Before the first episode it waits for the liveliness tokens of the services it feeds, so the
+services may start in any order.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from services.sensor_sim import replay
+from tltrack import keys
+from tltrack.config import Config, ConfigError, load_config, make_config
+from tltrack.engine.scenario import PRIMARY, simulate
+from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth
+from tltrack.service import Service, load_settings, setup_logging
+from tltrack.transport import LivelinessWatcher, ZenohSettings
+
+log = logging.getLogger("sensor_sim")
+NAME = "sensor_sim"
+
+
+class Settings(BaseSettings):
+    """Environment ``TLTRACK_SIM_<FIELD>`` or ``--<field>``."""
+
+    model_config = SettingsConfigDict(env_prefix="TLTRACK_SIM_", cli_prog_name=NAME)
+
+    config: Path | None = Field(None, description="TOML/JSON experiment config")
+    scenario: Literal["cv", "ct"] | None = None
+    preset: Literal["paper", "arasaratnam-haykin"] | None = None
+    truth: Literal["fixed", "random", "noise-free"] | None = None
+    seed: int | None = Field(None, ge=0)
+    steps: int | None = Field(None, ge=1, description="K, steps per episode")
+    particles: int | None = Field(None, ge=10)
+    primary_intensity: float | None = Field(None, gt=0)
+    episodes: int = Field(1, ge=1)
+    first_run: int = Field(0, ge=0, description="run index of the first episode")
+    episode_prefix: str = Field("ep", pattern=r"^[A-Za-z0-9_-]{1,40}$")
+    pace: float = Field(20.0, ge=0, description="steps per second; 0 = as fast as possible")
+    realtime: bool = Field(False, description="pace at one step per Ts")
+    replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
+    wait_for: list[str] = Field(
+        default_factory=lambda: ["source/s1:source_tracker", "primary:primary_tracker",
+                                 "referee:scorer"],
+        description="operator:service tokens to await before starting",
+    )
+    wait_timeout_s: float = Field(60.0, gt=0)
+    log_level: str = "INFO"
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+    def experiment_config(self) -> Config:
+        over = {"scenario": self.scenario, "preset": self.preset, "truth": self.truth,
+                "seed": self.seed, "K": self.steps, "particles": self.particles,
+                "primary_intensity": self.primary_intensity}
+        return load_config(self.config, **over) if self.config else make_config(**over)
+
+
+class Simulator:
+    def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
+        self.s, self.cfg, self.svc = settings, cfg, svc
+        self.sensors = [PRIMARY, *(src.id for src in cfg.sources)]
+        self.recorded = (replay.load(settings.replay_csv, self.sensors)
+                         if settings.replay_csv else None)
+        if self.recorded is not None:
+            self.cfg = cfg.with_(K=len(self.recorded[PRIMARY]))
+
+    @property
+    def period(self) -> float:
+        if self.s.realtime:
+            return self.cfg.Ts
+        return 1.0 / self.s.pace if self.s.pace > 0 else 0.0
+
+    def wait_for_services(self) -> bool:
+        wanted = [keys.alive(*w.split(":", 1)) for w in self.s.wait_for]
+        if not wanted:
+            return True
+        with LivelinessWatcher(self.svc.session, keys.ALIVE) as watcher:
+            deadline = time.monotonic() + self.s.wait_timeout_s
+            for key in wanted:
+                left = deadline - time.monotonic()
+                if left <= 0 or not watcher.wait_until(key, True, left):
+                    log.error("gave up waiting for %s", key)
+                    return False
+        log.info("all %d services alive", len(wanted))
+        return True
+
+    def run_episode(self, i: int) -> None:
+        run = self.s.first_run + i
+        e = f"{self.s.episode_prefix}-r{run}"
+        if self.recorded is None:
+            sim = simulate(self.cfg, run)
+            z: dict[str, NDArray[np.float64]] = sim.z
+            truth: NDArray[np.float64] | None = sim.truth
+        else:
+            z, truth = self.recorded, None
+        now = time.time()
+        self.svc.publish(keys.episode(e), EpisodeStart(
+            episode=e, sender=NAME, k=0, t_sensor=now, run=run,
+            config=self.cfg.model_dump(mode="json"), K=self.cfg.K,
+            steps_per_sec=1.0 / self.period if self.period else 0.0,
+        ))
+        log.info("episode %s: run %d, %d steps", e, run, self.cfg.K)
+        t_next = time.monotonic()
+        for k in range(1, self.cfg.K + 1):
+            if self.svc.stop.is_set():
+                break
+            t_next += self.period
+            t = time.time()
+            if truth is not None:
+                self.svc.publish(keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t,
+                                                      x=truth[k]))
+            for sid in self.sensors:
+                key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
+                self.svc.publish(key, Measurement(episode=e, sender=NAME, k=k, t_sensor=t,
+                                                  sensor=sid, z=z[sid][k - 1]))
+            self.svc.count("steps")
+            self.svc.publish_stats()
+            if (pause := t_next - time.monotonic()) > 0:
+                self.svc.stop.wait(pause)
+        done = not self.svc.stop.is_set()
+        self.svc.publish(keys.episode(e), EpisodeEnd(
+            episode=e, sender=NAME, k=k, t_sensor=time.time(),
+            reason="complete" if done else "aborted", steps_sent=k if done else k - 1,
+        ))
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = load_settings(Settings, argv)
+    setup_logging(settings.log_level)
+    try:
+        cfg = settings.experiment_config()
+    except ConfigError as err:
+        log.error("invalid configuration: %s", err)
+        raise SystemExit(2) from None
+    with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
+        svc.announce()
+        try:
+            sim = Simulator(settings, cfg, svc)
+        except replay.ReplayError as err:
+            log.error("%s", err)
+            raise SystemExit(2) from None
+        if not sim.wait_for_services():
+            raise SystemExit(3)
+        for i in range(settings.episodes):
+            if svc.stop.is_set():
+                break
+            sim.run_episode(i)

@@ -1,0 +1,3 @@
+from services.source_tracker.tracker import main
+
+main()

@@ -1,0 +1,119 @@
+"""Algorithm 1 as a service: step on each measurement in order, publish estimate and transfer."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from tltrack import keys
+from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.service import Service, load_settings, setup_logging
+from tltrack.tracking import SourceEpisode, StepQueue, warm_up
+from tltrack.transport import Received, ZenohSettings, decode_received
+
+log = logging.getLogger("source_tracker")
+NAME = "source_tracker"
+
+
+class Settings(BaseSettings):
+    """Environment ``TLTRACK_SOURCE_<FIELD>`` or ``--<field>``."""
+
+    model_config = SettingsConfigDict(env_prefix="TLTRACK_SOURCE_", cli_prog_name=NAME)
+
+    source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
+    filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
+    log_level: str = "INFO"
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+
+@dataclass
+class Episode:
+    start: EpisodeStart
+    tracker: SourceEpisode
+    steps: StepQueue[Measurement]
+
+
+class SourceTracker:
+    def __init__(self, settings: Settings, svc: Service) -> None:
+        self.s, self.svc = settings, svc
+        self.episodes: dict[str, Episode] = {}
+
+    def handle(self, item: Received) -> None:
+        try:
+            info = keys.parse(item.key)
+        except ValueError:
+            self.svc.rejects.add(item.key, "bad_key")
+            return
+        if info.kind == "episode":
+            self._on_episode(item)
+        elif info.kind == "source_meas" and info.episode is not None:
+            msg = decode_received(item, Measurement, self.svc.rejects)
+            if msg is not None:
+                self._on_measurement(info.episode, item.key, msg)
+
+    def _on_episode(self, item: Received) -> None:
+        end = decode_received(item, EpisodeEnd, None)
+        if end is not None:
+            self.episodes.pop(end.episode, None)
+            return
+        start = decode_received(item, EpisodeStart, self.svc.rejects)
+        if start is None or start.episode in self.episodes:
+            return
+        cfg = start.parsed_config()
+        if self.s.source_id not in {src.id for src in cfg.sources}:
+            log.info("episode %s has no source %s; ignored", start.episode, self.s.source_id)
+            return
+        while len(self.episodes) >= self.s.max_episodes:
+            self.episodes.pop(next(iter(self.episodes)))
+        tracker = SourceEpisode(cfg, start.run, self.s.filter, self.s.source_id)
+        self.episodes[start.episode] = Episode(start, tracker, StepQueue())
+        log.info("episode %s (run %d): %s", start.episode, start.run, tracker.name)
+
+    def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
+        ep = self.episodes.get(e)
+        if ep is None:
+            self.svc.count("measurement_without_episode")
+            return
+        verdict = ep.steps.offer(z.k, z)
+        if verdict != "accepted":
+            self.svc.rejects.add(key, verdict)
+            return
+        while (ready := ep.steps.ready()) is not None:
+            ep.steps.release()
+            self._step(e, ep, ready)
+
+    def _step(self, e: str, ep: Episode, z: Measurement) -> None:
+        t0 = time.perf_counter()
+        est, eta = ep.tracker.step(z)
+        step_ms = (time.perf_counter() - t0) * 1e3
+        sid = self.s.source_id
+        if z.k < ep.start.K:
+            self.svc.publish(keys.transfer(sid, e), Transfer(
+                episode=e, sender=sid, k=z.k, t_sensor=z.t_sensor, k_apply=z.k + 1,
+                eta=eta.mean[:, 0], P_eta=eta.cov[0],
+            ))
+        self.svc.publish(keys.source_estimate(sid, e), EstimateMsg(
+            episode=e, sender=sid, k=z.k, t_sensor=z.t_sensor, filter=ep.tracker.name,
+            x=est.mean[0], P=est.cov[0], transfer_used=False, t_sent=time.time(), step_ms=step_ms,
+        ))
+        self.svc.count("steps")
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = load_settings(Settings, argv)
+    setup_logging(settings.log_level)
+    warm_up(settings.filter)
+    with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
+        inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))
+        svc.announce()
+        tracker = SourceTracker(settings, svc)
+        while not svc.stop.is_set():
+            for item in svc.drain(inbox, timeout=0.2):
+                tracker.handle(item)
+            svc.publish_stats()

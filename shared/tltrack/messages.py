@@ -1,0 +1,558 @@
+"""The wire format: pydantic v2 models sent as msgpack maps, validated on receipt.
+
+Every message carries ``schema_version``, a ``type`` tag, ``episode``, ``sender``, the step ``k``
+and the sensor timestamp ``t_sensor``. :func:`encode` packs a model; :func:`decode` is the only way
+in and raises exactly one exception type, :class:`MessageRejected`, for *any* bad payload: too
+large (checked before unpacking), not msgpack, trailing bytes, nested too deep, wrong type tag,
+unknown schema version, wrong shapes, non-finite numbers, asymmetric or non-positive-definite
+covariances. Its ``reason`` is a short code from :data:`REASONS`, suitable as a counter label.
+
+On receipt validation is *strict* (no ``"1.5"`` -> 1.5, no ``True`` -> 1); constructing a model
+in code is lax, so a sender may pass NumPy arrays and scalars.
+
+:class:`RejectCounter` counts rejections per key and reason; :class:`DuplicateFilter` drops
+replayed or wildly out-of-window steps with bounded memory.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from enum import StrEnum
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, TypeVar
+
+import msgpack
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
+
+SCHEMA_VERSION = 1
+SUPPORTED_VERSIONS = frozenset({1})
+
+MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
+MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
+SYMMETRY_RTOL = 1e-9
+MAX_K = 2**31 - 1
+
+#: Every ``MessageRejected.reason``.
+REASONS = (
+    "too_large",  # payload over MAX_PAYLOAD_BYTES
+    "not_msgpack",  # not decodable msgpack, trailing bytes, over the unpacker's limits
+    "bad_structure",  # not a map, nested too deep, or a value of a type msgpack maps we never send
+    "unknown_version",  # schema_version missing or not supported
+    "wrong_type",  # type tag is not the expected message type
+    "bad_shape",  # wrong vector/matrix dimensions
+    "non_finite",  # NaN or infinity
+    "not_symmetric",  # covariance asymmetric beyond SYMMETRY_RTOL
+    "not_spd",  # covariance not positive-definite (Cholesky failed)
+    "invalid",  # any other schema violation (missing field, wrong type, out of range...)
+    "internal",  # the validator itself failed: a bug, still reported as a rejection
+)
+
+
+class MessageRejected(Exception):  # noqa: N818 (the name the services use)
+    """A payload was refused. ``reason`` is one of :data:`REASONS`; ``detail`` is for logs."""
+
+    def __init__(self, reason: str, detail: str = "") -> None:
+        self.reason = reason
+        self.detail = detail
+        super().__init__(f"{reason}: {detail}" if detail else reason)
+
+
+# ---- field types and checks -------------------------------------------------------------------
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Id = Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")]
+Step = Annotated[int, Field(ge=0, le=MAX_K)]
+Timestamp = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+def _as_list(v: Any) -> Any:
+    """Let senders pass NumPy arrays; on receipt values are already lists."""
+    tolist = getattr(v, "tolist", None)
+    return tolist() if callable(tolist) and not isinstance(v, list) else v
+
+
+if TYPE_CHECKING:  # senders may pass NumPy arrays; at run time pydantic turns them into lists
+    Vector = Any
+    Matrix = Any
+else:
+    Vector = Annotated[list[Finite], BeforeValidator(_as_list)]  #: list[float] on the wire
+    Matrix = Annotated[list[list[Finite]], BeforeValidator(_as_list)]  #: list[list[float]]
+
+
+def _check_vector(v: list[float], sizes: tuple[int, ...], name: str) -> list[float]:
+    if len(v) not in sizes:
+        want = " or ".join(map(str, sizes))
+        raise PydanticCustomError("bad_shape", f"{name} has {len(v)} entries, expected {want}")
+    return v
+
+
+def _check_covariance(P: list[list[float]], n: int, name: str) -> list[list[float]]:
+    """Shape n x n, symmetric to SYMMETRY_RTOL of its largest entry, Cholesky succeeds."""
+    if len(P) != n or any(len(row) != n for row in P):
+        shape = f"{len(P)}x{'/'.join(str(len(r)) for r in P) or 0}"
+        raise PydanticCustomError("bad_shape", f"{name} is {shape}, expected {n}x{n}")
+    scale = max(abs(x) for row in P for x in row)
+    asym = max(abs(P[i][j] - P[j][i]) for i in range(n) for j in range(i + 1, n)) if n > 1 else 0.0
+    if asym > SYMMETRY_RTOL * scale:
+        raise PydanticCustomError(
+            "not_symmetric", f"{name} is not symmetric (max |P-P'| = {asym:.3g})"
+        )
+    # Plain Cholesky on the lower triangle: every pivot must be finite and > 0.
+    L = [[0.0] * n for _ in range(n)]
+    for j in range(n):
+        s = P[j][j] - sum(L[j][m] * L[j][m] for m in range(j))
+        if not (s > 0.0 and math.isfinite(s)):
+            raise PydanticCustomError("not_spd", f"{name} is not positive-definite")
+        L[j][j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            L[i][j] = (P[i][j] - sum(L[i][m] * L[j][m] for m in range(j))) / L[j][j]
+            if not math.isfinite(L[i][j]):
+                raise PydanticCustomError("not_spd", f"{name} is not positive-definite")
+    return P
+
+
+def _all_finite(obj: Any) -> bool:
+    if isinstance(obj, float):
+        return math.isfinite(obj)
+    if isinstance(obj, list | tuple):
+        return all(_all_finite(v) for v in obj)
+    if isinstance(obj, dict):
+        return all(_all_finite(v) for v in obj.values())
+    return True
+
+
+# ---- models -----------------------------------------------------------------------------------
+
+
+class Message(BaseModel):
+    """Fields every message carries."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    TYPE: ClassVar[str] = ""
+
+    schema_version: int = SCHEMA_VERSION
+    episode: Id
+    sender: Id
+    k: Step
+    t_sensor: Timestamp
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, v: int) -> int:
+        if v not in SUPPORTED_VERSIONS:
+            raise PydanticCustomError("unknown_version", f"schema_version {v} is not supported")
+        return v
+
+
+class Measurement(Message):
+    """One sensor's range-bearing measurement z_k = [r, bearing] of step k."""
+
+    TYPE: ClassVar[str] = "measurement"
+    type: Literal["measurement"] = "measurement"
+    sensor: Id
+    z: Vector
+
+    @field_validator("z")
+    @classmethod
+    def _shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (2,), "z")
+
+
+class Truth(Message):
+    """The true state x_k (referee data)."""
+
+    TYPE: ClassVar[str] = "truth"
+    type: Literal["truth"] = "truth"
+    x: Vector
+
+    @field_validator("x")
+    @classmethod
+    def _shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (4, 5), "x")
+
+
+class Transfer(Message):
+    """The source's predicted-observation density N(eta, P_eta) for step ``k_apply``.
+
+    ``k`` is the source step that produced it, so ``k == k_apply - 1``.
+    """
+
+    TYPE: ClassVar[str] = "transfer"
+    type: Literal["transfer"] = "transfer"
+    k_apply: Annotated[int, Field(ge=1, le=MAX_K)]
+    eta: Vector
+    P_eta: Matrix
+
+    @field_validator("eta")
+    @classmethod
+    def _eta_shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (2,), "eta")
+
+    @field_validator("P_eta")
+    @classmethod
+    def _P_ok(cls, v: list[list[float]]) -> list[list[float]]:
+        return _check_covariance(v, 2, "P_eta")
+
+    @model_validator(mode="after")
+    def _steps(self) -> Transfer:
+        if self.k != self.k_apply - 1:
+            raise PydanticCustomError(
+                "invalid", f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1})"
+            )
+        return self
+
+
+class EstimateMsg(Message):
+    """A filter's posterior mean and covariance at step k."""
+
+    TYPE: ClassVar[str] = "estimate"
+    type: Literal["estimate"] = "estimate"
+    filter: Annotated[str, Field(min_length=1, max_length=64)]
+    x: Vector
+    P: Matrix
+    transfer_used: bool
+    t_sent: Timestamp
+    step_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+    @field_validator("x")
+    @classmethod
+    def _x_shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (4, 5), "x")
+
+    @model_validator(mode="after")
+    def _P_ok(self) -> EstimateMsg:
+        _check_covariance(self.P, len(self.x), "P")
+        return self
+
+
+class EpisodeStart(Message):
+    """sensor_sim announces an episode: its config (a :class:`tltrack.config.Config` dump),
+    run index, number of steps and pace. ``k`` is 0.
+    """
+
+    TYPE: ClassVar[str] = "episode_start"
+    type: Literal["episode_start"] = "episode_start"
+    run: Annotated[int, Field(ge=0, le=MAX_K)]
+    config: dict[str, Any]
+    K: Annotated[int, Field(ge=1, le=MAX_K)]
+    steps_per_sec: Annotated[float, Field(ge=0, allow_inf_nan=False)] = Field(
+        description="pace of the sensor stream; 0 means as fast as possible"
+    )
+
+    @field_validator("config")
+    @classmethod
+    def _config_ok(cls, v: dict[str, Any]) -> dict[str, Any]:
+        from tltrack.config import ConfigError, make_config
+
+        if not _all_finite(v):
+            raise PydanticCustomError("non_finite", "config holds a NaN or infinity")
+        try:
+            cfg = make_config(v)
+        except ConfigError as err:
+            raise PydanticCustomError("invalid", "config: {detail}", {"detail": str(err)}) from None
+        return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
+
+    def parsed_config(self) -> Any:
+        """The validated :class:`tltrack.config.Config`."""
+        from tltrack.config import make_config
+
+        return make_config(self.config)
+
+
+class EpisodeEnd(Message):
+    """sensor_sim closes an episode after its last step ``k`` (or aborts it)."""
+
+    TYPE: ClassVar[str] = "episode_end"
+    type: Literal["episode_end"] = "episode_end"
+    reason: Literal["complete", "aborted"] = "complete"
+    steps_sent: Annotated[int, Field(ge=0, le=MAX_K)]
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    m.TYPE: m for m in (Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd)
+}
+
+M = TypeVar("M", bound=Message)
+
+
+# ---- encode / decode --------------------------------------------------------------------------
+
+
+def encode(msg: Message) -> bytes:
+    """Pack a message as a msgpack map. ``ValueError`` if it exceeds :data:`MAX_PAYLOAD_BYTES`."""
+    data = msgpack.packb(msg.model_dump(mode="python"), use_bin_type=True)
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"{type(msg).__name__} encodes to {len(data)} B > {MAX_PAYLOAD_BYTES} B")
+    return data
+
+
+_SCALARS = (str, int, float, bool, type(None))
+
+
+def _check_plain(obj: Any, depth: int = 0) -> None:
+    """Only plain msgpack types (no ext types, no bytes), nested at most MAX_DEPTH."""
+    if depth > MAX_DEPTH:
+        raise MessageRejected("bad_structure", f"nested deeper than {MAX_DEPTH}")
+    if isinstance(obj, _SCALARS):
+        return
+    if isinstance(obj, list):
+        for item in obj:
+            _check_plain(item, depth + 1)
+        return
+    if isinstance(obj, dict):
+        for key, item in obj.items():
+            if not isinstance(key, str):
+                raise MessageRejected("bad_structure", "map key is not a string")
+            _check_plain(item, depth + 1)
+        return
+    raise MessageRejected("bad_structure", f"value of type {type(obj).__name__}")
+
+
+def _unpack(payload: bytes) -> Any:
+    n = len(payload)
+    return msgpack.unpackb(
+        payload,
+        raw=False,
+        use_list=True,
+        strict_map_key=True,
+        max_str_len=min(n, 4096),
+        max_bin_len=0,
+        max_ext_len=0,
+        max_array_len=min(n, 1024),
+        max_map_len=min(n, 256),
+    )
+
+
+def _reason_of(err: ValidationError) -> tuple[str, str]:
+    first = err.errors()[0]
+    kind = first["type"]
+    loc = ".".join(str(p) for p in first["loc"]) or "(message)"
+    detail = f"{loc}: {first['msg']}"
+    if kind in REASONS:
+        return kind, detail
+    if kind == "finite_number":
+        return "non_finite", detail
+    if kind in ("too_short", "too_long"):
+        return "bad_shape", detail
+    return "invalid", detail
+
+
+def decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> M:
+    """Unpack and validate one ``expected_type`` message; only :class:`MessageRejected` escapes."""
+    try:
+        return _decode(payload, expected_type)
+    except MessageRejected:
+        raise
+    except Exception as err:  # a bug in a validator must not take a service down
+        raise MessageRejected("internal", f"{type(err).__name__}: {err}") from None
+
+
+def _decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> M:
+    if not isinstance(payload, bytes | bytearray | memoryview):
+        raise MessageRejected("bad_structure", f"payload is {type(payload).__name__}, not bytes")
+    n = len(payload)
+    if n > MAX_PAYLOAD_BYTES:
+        raise MessageRejected("too_large", f"{n} B > {MAX_PAYLOAD_BYTES} B")
+    try:
+        data = _unpack(bytes(payload))
+    except Exception as err:
+        raise MessageRejected("not_msgpack", f"{type(err).__name__}: {err}") from None
+    if not isinstance(data, dict):
+        raise MessageRejected("bad_structure", f"top level is {type(data).__name__}, not a map")
+    _check_plain(data)
+    version = data.get("schema_version")
+    if type(version) is not int or version not in SUPPORTED_VERSIONS:
+        raise MessageRejected("unknown_version", f"schema_version {version!r}")
+    tag = data.get("type")
+    if tag != expected_type.TYPE:
+        raise MessageRejected("wrong_type", f"type {tag!r}, expected {expected_type.TYPE!r}")
+    try:
+        return expected_type.model_validate(data, strict=True)
+    except ValidationError as err:
+        reason, detail = _reason_of(err)
+        raise MessageRejected(reason, detail) from None
+
+
+# ---- reject accounting ------------------------------------------------------------------------
+
+
+class RejectCounter:
+    """Thread-safe counts of rejected payloads per key expression and per reason.
+
+    At most ``max_keys`` distinct keys are tracked; later ones are folded into ``"(other)"`` so a
+    sender spraying fresh key names cannot grow it without bound.
+    """
+
+    OTHER = "(other)"
+
+    def __init__(self, max_keys: int = 256) -> None:
+        self._lock = threading.Lock()
+        self._max_keys = max_keys
+        self._by_key: dict[str, int] = {}
+        self._by_reason: dict[str, int] = {}
+        self._by_key_reason: dict[tuple[str, str], int] = {}
+        self._total = 0
+
+    def add(self, key: str, reason: str) -> None:
+        key = str(key)
+        with self._lock:
+            if key not in self._by_key and len(self._by_key) >= self._max_keys:
+                key = self.OTHER
+            self._by_key[key] = self._by_key.get(key, 0) + 1
+            self._by_reason[reason] = self._by_reason.get(reason, 0) + 1
+            kr = (key, reason)
+            self._by_key_reason[kr] = self._by_key_reason.get(kr, 0) + 1
+            self._total += 1
+
+    def record(self, key: str, err: MessageRejected) -> None:
+        self.add(key, err.reason)
+
+    @property
+    def total(self) -> int:
+        with self._lock:
+            return self._total
+
+    def by_reason(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._by_reason)
+
+    def by_key(self) -> dict[str, int]:
+        with self._lock:
+            return dict(self._by_key)
+
+    def count(self, key: str | None = None, reason: str | None = None) -> int:
+        with self._lock:
+            if key is None and reason is None:
+                return self._total
+            if key is None:
+                return self._by_reason.get(str(reason), 0)
+            if reason is None:
+                return self._by_key.get(key, 0)
+            return self._by_key_reason.get((key, reason), 0)
+
+    def snapshot(self) -> dict[str, Any]:
+        """A plain dict for a stats message: total, by_reason, by_key."""
+        with self._lock:
+            return {
+                "total": self._total,
+                "by_reason": dict(self._by_reason),
+                "by_key": dict(self._by_key),
+            }
+
+
+# ---- duplicate / replay filter ----------------------------------------------------------------
+
+
+class Verdict(StrEnum):
+    """What :meth:`DuplicateFilter.admit` decided."""
+
+    NEW = "new"
+    DUPLICATE = "duplicate"
+    TOO_OLD = "too_old"  # k <= latest - window
+    TOO_FAR_AHEAD = "too_far_ahead"  # k > latest + max_ahead
+    OVERFLOW = "overflow"  # too many senders for one step: refused to bound memory
+
+    @property
+    def accepted(self) -> bool:
+        return self is Verdict.NEW
+
+
+class _Stream:
+    __slots__ = ("latest", "seen")
+
+    def __init__(self) -> None:
+        self.latest: int | None = None
+        self.seen: dict[int, set[str]] = {}
+
+
+class DuplicateFilter:
+    """Remembers accepted ``(k, sender)`` pairs per stream within a sliding window.
+
+    For each stream (typically the key expression), with ``latest`` the largest accepted k:
+
+    - ``k <= latest - window``: TOO_OLD (forgotten, so not distinguishable from a replay);
+    - ``k > latest + max_ahead``: TOO_FAR_AHEAD (a bogus step would otherwise push the window away);
+    - ``(k, sender)`` already accepted: DUPLICATE;
+    - otherwise NEW, and it is remembered.
+
+    The first message of a stream is always NEW. Memory is bounded: at most ``window`` steps times
+    ``max_senders`` senders per stream, and ``max_streams`` streams (least recently used evicted).
+    Thread-safe.
+    """
+
+    def __init__(
+        self,
+        window: int = 64,
+        max_ahead: int | None = None,
+        max_senders: int = 16,
+        max_streams: int = 1024,
+    ) -> None:
+        if window < 1 or max_senders < 1 or max_streams < 1:
+            raise ValueError("window, max_senders and max_streams must be >= 1")
+        self.window = window
+        self.max_ahead = window if max_ahead is None else max_ahead
+        if self.max_ahead < 0:
+            raise ValueError("max_ahead must be >= 0")
+        self.max_senders = max_senders
+        self.max_streams = max_streams
+        self._streams: OrderedDict[str, _Stream] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def admit(self, stream: str, sender: str, k: int) -> Verdict:
+        """Check ``(k, sender)`` on ``stream`` and remember it if NEW."""
+        with self._lock:
+            s = self._streams.get(stream)
+            if s is None:
+                s = self._streams[stream] = _Stream()
+                if len(self._streams) > self.max_streams:
+                    self._streams.popitem(last=False)
+            else:
+                self._streams.move_to_end(stream)
+            if s.latest is not None:
+                if k <= s.latest - self.window:
+                    return Verdict.TOO_OLD
+                if k > s.latest + self.max_ahead:
+                    return Verdict.TOO_FAR_AHEAD
+            senders = s.seen.get(k)
+            if senders is not None and sender in senders:
+                return Verdict.DUPLICATE
+            if senders is not None and len(senders) >= self.max_senders:
+                return Verdict.OVERFLOW
+            s.seen.setdefault(k, set()).add(sender)
+            if s.latest is None or k > s.latest:
+                s.latest = k
+                floor = k - self.window
+                for old in [kk for kk in s.seen if kk <= floor]:
+                    del s.seen[old]
+            return Verdict.NEW
+
+    def admit_msg(self, stream: str, msg: Message) -> Verdict:
+        return self.admit(stream, msg.sender, msg.k)
+
+    def latest(self, stream: str) -> int | None:
+        with self._lock:
+            s = self._streams.get(stream)
+            return None if s is None else s.latest
+
+    def reset(self, stream: str | None = None) -> None:
+        """Forget one stream (e.g. at a new episode), or all of them."""
+        with self._lock:
+            if stream is None:
+                self._streams.clear()
+            else:
+                self._streams.pop(stream, None)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._streams)

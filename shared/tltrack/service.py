@@ -1,0 +1,137 @@
+"""What every service process shares: settings, a session, a stop flag, a liveliness token, an
+inbox, and its statistics.
+
+A service's life: parse settings (environment and flags; a bad one exits with the field named),
+open a session with ``with``, subscribe, *then* declare its liveliness token (so anyone who sees it
+alive knows its subscriptions are in place), loop on its inbox until SIGTERM/SIGINT, and close
+everything on the way out (NOTES.md: an unclosed session with a callback subscriber hangs).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from types import FrameType
+from typing import Any, TypeVar
+
+import zenoh
+from pydantic import ValidationError
+from pydantic_settings import BaseSettings
+
+from tltrack import keys
+from tltrack.config import describe_validation_error
+from tltrack.messages import DuplicateFilter, Message, RejectCounter
+from tltrack.transport import Publisher, Received, Subscriber, ZenohSettings, declare_token, open_session
+
+log = logging.getLogger(__name__)
+
+S = TypeVar("S", bound=BaseSettings)
+
+
+def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
+    """Settings from the environment and ``--flags``; exits with status 2 naming a bad field."""
+    try:
+        return cls(_cli_parse_args=sys.argv[1:] if argv is None else argv)
+    except ValidationError as err:
+        print(f"error: invalid settings for {cls.__name__}: {describe_validation_error(err)}",
+              file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def setup_logging(level: str = "INFO") -> None:
+    logging.basicConfig(
+        level=level.upper(), stream=sys.stderr,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+
+
+class Service:
+    """The plumbing of one service; use as ``with Service(...) as svc:``."""
+
+    def __init__(self, name: str, operator: str, zenoh_settings: ZenohSettings) -> None:
+        self.name, self.operator = name, operator
+        self.stop = threading.Event()
+        self.rejects = RejectCounter()
+        self.duplicates = DuplicateFilter()
+        self.counters: dict[str, int] = {}
+        self._zenoh = zenoh_settings
+        self._subs: list[Subscriber] = []
+        self._pubs: dict[str, Publisher] = {}
+        self._token: Any = None
+        self._stats_pub: Publisher | None = None
+        self._last_stats = 0.0
+
+    def __enter__(self) -> Service:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._on_signal)
+        self._exit = contextlib.ExitStack()
+        self.session: zenoh.Session = self._exit.enter_context(open_session(self._zenoh))
+        self._stats_pub = Publisher(self.session, keys.stats(self.operator, self.name))
+        log.info("%s: session open (%s)", self.name, ", ".join(self._zenoh.endpoints))
+        return self
+
+    def _on_signal(self, signum: int, _frame: FrameType | None) -> None:
+        log.info("%s: signal %d, stopping", self.name, signum)
+        self.stop.set()
+
+    def subscribe(self, *key_exprs: str, liveliness: bool = False) -> Subscriber:
+        """One inbox for all ``key_exprs``: samples arrive in one queue, in arrival order."""
+        sub = Subscriber(self.session, list(key_exprs), liveliness=liveliness, history=liveliness)
+        self._subs.append(sub)
+        return sub
+
+    def announce(self) -> None:
+        """Declare the liveliness token; call it once every subscription is in place."""
+        self._token = declare_token(self.session, keys.alive(self.operator, self.name))
+
+    def publish(self, key: str, msg: Message) -> None:
+        pub = self._pubs.get(key)
+        if pub is None:
+            pub = self._pubs[key] = Publisher(self.session, key)
+        pub.put(msg)
+
+    def count(self, what: str, n: int = 1) -> None:
+        self.counters[what] = self.counters.get(what, 0) + n
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "service": self.name,
+            "operator": self.operator,
+            "t": time.time(),
+            "counters": dict(self.counters),
+            "rejected": self.rejects.snapshot(),
+            "dropped": sum(s.dropped for s in self._subs),
+        }
+
+    def publish_stats(self, every: float = 1.0, force: bool = False) -> None:
+        """Publish :meth:`stats` as JSON at most once per ``every`` seconds."""
+        now = time.monotonic()
+        if self._stats_pub is not None and (force or now - self._last_stats >= every):
+            self._stats_pub.put(json.dumps(self.stats()).encode())
+            self._last_stats = now
+
+    def drain(self, sub: Subscriber, timeout: float) -> Iterator[Received]:
+        """Wait up to ``timeout`` for a sample, then yield it and everything queued behind it."""
+        first = sub.recv(timeout)
+        if first is not None:
+            yield first
+            yield from sub.drain()
+
+    def __exit__(self, *exc: object) -> None:
+        with contextlib.suppress(Exception):
+            self.publish_stats(force=True)
+        if self._token is not None:
+            with contextlib.suppress(Exception):
+                self._token.undeclare()
+        for s in self._subs:
+            s.close()
+        for p in [*self._pubs.values(), *([self._stats_pub] if self._stats_pub else [])]:
+            p.close()
+        self._exit.close()
+        log.info("%s: session closed", self.name)

@@ -1,0 +1,125 @@
+"""One episode of a live tracker: the same filters, streams and start as the Monte-Carlo engine.
+
+A live tracker is the engine with a batch of one run: it builds its filter through
+:func:`tltrack.engine.registry.build`, starts it at the run's x0_hat, and draws from the run's own
+random stream. So a lock-step replay of run r computes, to rounding, exactly what
+``tltrack experiment`` computes for run r. Wire messages are turned into
+:class:`~tltrack.models.observation.Observation` here, and nowhere else.
+"""
+
+from __future__ import annotations
+
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from tltrack.config import Config
+from tltrack.engine.registry import build, parse
+from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
+from tltrack.filters.base import Estimate, Filter
+from tltrack.filters.transfer import Primary, Source
+from tltrack.messages import Measurement, Transfer
+from tltrack.models.motion import motion_model
+from tltrack.models.observation import Observation
+
+T = TypeVar("T")
+
+
+def _filter(cfg: Config, name: str, run: int, source_id: str | None = None) -> Filter:
+    x0_hat = initial_estimate(cfg, run)[:, None]
+    return build(parse(name), cfg, motion_model(cfg), x0_hat, [run], source_id)
+
+
+def measurement(cfg: Config, msg: Measurement, sensor_id: str) -> Observation:
+    """z_k with the sensor's own Q_w."""
+    s = sensor(cfg, sensor_id)
+    return Observation.broadcast(s, np.asarray(msg.z), s.R(intensity(cfg, sensor_id)))
+
+
+def transfer(cfg: Config, msg: Transfer, source_id: str) -> Observation:
+    """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor."""
+    return Observation.broadcast(sensor(cfg, source_id), np.asarray(msg.eta), np.asarray(msg.P_eta))
+
+
+class SourceEpisode:
+    """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1)."""
+
+    def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
+        self.cfg, self.source_id = cfg, source_id
+        self.name = f"source-{kind}"
+        s = sensor(cfg, source_id)
+        filt = _filter(cfg, self.name, run, source_id)
+        self.role = Source(filt, s, s.R(intensity(cfg, source_id)))
+
+    def step(self, z: Measurement) -> tuple[Estimate, Observation]:
+        return self.role.step(measurement(self.cfg, z, self.source_id))
+
+
+class PrimaryEpisode:
+    """Algorithm 2 for one episode, with an isolated twin run alongside for comparison."""
+
+    def __init__(self, cfg: Config, run: int, kind: str) -> None:
+        self.cfg = cfg
+        self.tl_name, self.iso_name = f"tl-{kind}", kind
+        self.tl = Primary(_filter(cfg, self.tl_name, run))
+        self.iso = Primary(_filter(cfg, self.iso_name, run))
+
+    def step(
+        self, z: Measurement, transfers: dict[str, Transfer]
+    ) -> tuple[Estimate, Estimate]:
+        """(TL estimate, isolated estimate); ``transfers`` maps source id -> its transfer for k."""
+        obs = measurement(self.cfg, z, PRIMARY)
+        extra = [transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources
+                 if s.id in transfers]  # the engine's order
+        return self.tl.step(obs, extra), self.iso.step(obs)
+
+
+class StepQueue(Generic[T]):
+    """Releases step-indexed items in order k = 1, 2, ..., holding early ones.
+
+    ``offer`` refuses a duplicate, a step already released (stale) or one more than ``window``
+    steps ahead, so a flood of bogus steps cannot grow memory.
+    """
+
+    def __init__(self, window: int = 256) -> None:
+        self.next_k = 1
+        self.window = window
+        self._held: dict[int, T] = {}
+
+    def offer(self, k: int, item: T) -> str:
+        """``"accepted"``, ``"duplicate"``, ``"stale"`` or ``"too_far"``."""
+        if k < self.next_k:
+            return "stale"
+        if k >= self.next_k + self.window:
+            return "too_far"
+        if k in self._held:
+            return "duplicate"
+        self._held[k] = item
+        return "accepted"
+
+    def ready(self) -> T | None:
+        """The item for ``next_k`` if it has arrived."""
+        return self._held.get(self.next_k)
+
+    def release(self) -> T:
+        item = self._held.pop(self.next_k)
+        self.next_k += 1
+        return item
+
+
+def warm_up(kind: str) -> None:
+    """Run one tiny episode so compiled kernels are ready before the first real measurement."""
+    from tltrack.config import make_config
+    from tltrack.engine.scenario import simulate
+
+    cfg = make_config(particles=10, K=2)
+    run = simulate(cfg, 0)
+    sid = cfg.source.id
+    src, prim = SourceEpisode(cfg, 0, kind, sid), PrimaryEpisode(cfg, 0, kind)
+    for k in (1, 2):
+        z = {i: Measurement(episode="warmup", sender="warmup", k=k, t_sensor=0.0, sensor=i,
+                            z=run.z[i][k - 1]) for i in (PRIMARY, sid)}
+        _, eta = src.step(z[sid])
+        t = Transfer(episode="warmup", sender=sid, k=k, t_sensor=0.0, k_apply=k + 1,
+                     eta=eta.mean[:, 0], P_eta=eta.cov[0])
+        prim.step(z[PRIMARY], {sid: t})
