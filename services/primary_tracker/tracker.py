@@ -36,6 +36,7 @@ class Settings(BaseSettings):
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
+    gap_timeout_s: float = Field(1.0, gt=0, description="step without a measurement missing this long")
     max_episodes: int = Field(4, ge=1)
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
@@ -137,6 +138,10 @@ class PrimaryTracker:
         """Take every step that can be taken; the seconds until the next deadline, if any."""
         wait: float | None = None
         for e, ep in list(self.episodes.items()):
+            if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
+                for k in ep.steps.skip():
+                    log.warning("episode %s: no measurement for step %d; transfer only", e, k)
+                    self._step(e, ep, k, None, time.time(), ep.transfers.pop(k, {}))
             while (z := ep.steps.ready()) is not None:
                 now = time.monotonic()
                 if ep.ready_since is None:
@@ -153,27 +158,28 @@ class PrimaryTracker:
                 ep.steps.release()
                 ep.transfers.pop(z.k, None)
                 ep.ready_since = None
-                self._step(e, ep, z, have)
+                self._step(e, ep, z.k, z, z.t_sensor, have)
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:
         """A source whose token went away is not waited for; an unseen one is (it may be late)."""
         return sid in self.alive or sid not in self.seen
 
-    def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
+    def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float,
+              transfers: dict[str, Transfer]) -> None:
         t0 = time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
         used = bool(transfers)
-        self._publish(e, "tl", ep.tracker.tl_name, z, tl, used, step_ms)
-        self._publish(e, "isolated", ep.tracker.iso_name, z, iso, False, step_ms)
-        self.svc.count("steps")
+        self._publish(e, "tl", ep.tracker.tl_name, k, t_sensor, tl, used, step_ms)
+        self._publish(e, "isolated", ep.tracker.iso_name, k, t_sensor, iso, False, step_ms)
+        self.svc.count("steps" if z is not None else "steps_without_measurement")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
 
-    def _publish(self, e: str, role: str, name: str, z: Measurement, est: Estimate, used: bool,
-                 step_ms: float) -> None:
+    def _publish(self, e: str, role: str, name: str, k: int, t_sensor: float, est: Estimate,
+                 used: bool, step_ms: float) -> None:
         self.svc.publish(keys.primary_estimate(role, e), EstimateMsg(
-            episode=e, sender=keys.PRIMARY, k=z.k, t_sensor=z.t_sensor, filter=name,
+            episode=e, sender=keys.PRIMARY, k=k, t_sensor=t_sensor, filter=name,
             x=est.mean[0], P=est.cov[0], transfer_used=used, t_sent=time.time(), step_ms=step_ms,
         ))
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -60,7 +60,7 @@ class Settings(BaseSettings):
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
     def experiment_config(self) -> Config:
-        over = {"scenario": self.scenario, "preset": self.preset, "truth": self.truth,
+        over: dict[str, Any] = {"scenario": self.scenario, "preset": self.preset, "truth": self.truth,
                 "seed": self.seed, "K": self.steps, "particles": self.particles,
                 "primary_intensity": self.primary_intensity}
         return load_config(self.config, **over) if self.config else make_config(**over)

@@ -28,6 +28,7 @@ class Settings(BaseSettings):
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
     max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
+    gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
@@ -83,26 +84,33 @@ class SourceTracker:
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":
             self.svc.rejects.add(key, verdict)
-            return
-        while (ready := ep.steps.ready()) is not None:
-            ep.steps.release()
-            self._step(e, ep, ready)
 
-    def _step(self, e: str, ep: Episode, z: Measurement) -> None:
+    def advance(self) -> None:
+        """Step on every measurement in order; predict through steps missing too long."""
+        for e, ep in list(self.episodes.items()):
+            if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
+                for k in ep.steps.skip():
+                    log.warning("episode %s: no measurement for step %d; predicting", e, k)
+                    self._step(e, ep, k, None, time.time())
+            while (z := ep.steps.ready()) is not None:
+                ep.steps.release()
+                self._step(e, ep, z.k, z, z.t_sensor)
+
+    def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float) -> None:
         t0 = time.perf_counter()
         est, eta = ep.tracker.step(z)
         step_ms = (time.perf_counter() - t0) * 1e3
         sid = self.s.source_id
-        if z.k < ep.start.K:
+        if k < ep.start.K:
             self.svc.publish(keys.transfer(sid, e), Transfer(
-                episode=e, sender=sid, k=z.k, t_sensor=z.t_sensor, k_apply=z.k + 1,
+                episode=e, sender=sid, k=k, t_sensor=t_sensor, k_apply=k + 1,
                 eta=eta.mean[:, 0], P_eta=eta.cov[0],
             ))
         self.svc.publish(keys.source_estimate(sid, e), EstimateMsg(
-            episode=e, sender=sid, k=z.k, t_sensor=z.t_sensor, filter=ep.tracker.name,
+            episode=e, sender=sid, k=k, t_sensor=t_sensor, filter=ep.tracker.name,
             x=est.mean[0], P=est.cov[0], transfer_used=False, t_sent=time.time(), step_ms=step_ms,
         ))
-        self.svc.count("steps")
+        self.svc.count("steps" if z is not None else "steps_predicted_only")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -114,6 +122,7 @@ def main(argv: list[str] | None = None) -> None:
         svc.announce()
         tracker = SourceTracker(settings, svc)
         while not svc.stop.is_set():
-            for item in svc.drain(inbox, timeout=0.2):
+            for item in svc.drain(inbox, timeout=0.1):
                 tracker.handle(item)
+            tracker.advance()
             svc.publish_stats()

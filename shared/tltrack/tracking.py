@@ -51,8 +51,9 @@ class SourceEpisode:
         filt = _filter(cfg, self.name, run, source_id)
         self.role = Source(filt, s, s.R(intensity(cfg, source_id)))
 
-    def step(self, z: Measurement) -> tuple[Estimate, Observation]:
-        return self.role.step(measurement(self.cfg, z, self.source_id))
+    def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
+        """``None``: the measurement of this step never came; predict through it."""
+        return self.role.step(None if z is None else measurement(self.cfg, z, self.source_id))
 
 
 class PrimaryEpisode:
@@ -65,10 +66,13 @@ class PrimaryEpisode:
         self.iso = Primary(_filter(cfg, self.iso_name, run))
 
     def step(
-        self, z: Measurement, transfers: dict[str, Transfer]
+        self, z: Measurement | None, transfers: dict[str, Transfer]
     ) -> tuple[Estimate, Estimate]:
-        """(TL estimate, isolated estimate); ``transfers`` maps source id -> its transfer for k."""
-        obs = measurement(self.cfg, z, PRIMARY)
+        """(TL estimate, isolated estimate); ``transfers`` maps source id -> its transfer for k.
+
+        ``z=None``: the primary's own measurement never came; the transfers alone update.
+        """
+        obs = None if z is None else measurement(self.cfg, z, PRIMARY)
         extra = [transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources
                  if s.id in transfers]  # the engine's order
         return self.tl.step(obs, extra), self.iso.step(obs)
@@ -78,13 +82,15 @@ class StepQueue(Generic[T]):
     """Releases step-indexed items in order k = 1, 2, ..., holding early ones.
 
     ``offer`` refuses a duplicate, a step already released (stale) or one more than ``window``
-    steps ahead, so a flood of bogus steps cannot grow memory.
+    steps ahead, so a flood of bogus steps cannot grow memory. When a step is missing while later
+    ones wait, :meth:`stalled` reports how long; the caller may then :meth:`skip` it.
     """
 
     def __init__(self, window: int = 256) -> None:
         self.next_k = 1
         self.window = window
         self._held: dict[int, T] = {}
+        self._stall_since: float | None = None
 
     def offer(self, k: int, item: T) -> str:
         """``"accepted"``, ``"duplicate"``, ``"stale"`` or ``"too_far"``."""
@@ -104,7 +110,24 @@ class StepQueue(Generic[T]):
     def release(self) -> T:
         item = self._held.pop(self.next_k)
         self.next_k += 1
+        self._stall_since = None
         return item
+
+    def stalled(self, now: float) -> float:
+        """Seconds that ``next_k`` has been missing while a later step waits (0 if not)."""
+        if self.next_k in self._held or not self._held:
+            self._stall_since = None
+            return 0.0
+        if self._stall_since is None:
+            self._stall_since = now
+        return now - self._stall_since
+
+    def skip(self) -> list[int]:
+        """Give up on every missing step up to the next one held; returns the skipped steps."""
+        first = self.next_k
+        self.next_k = min(self._held)
+        self._stall_since = None
+        return list(range(first, self.next_k))
 
 
 def warm_up(kind: str) -> None:

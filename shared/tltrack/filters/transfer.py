@@ -7,6 +7,9 @@ with its data would, and its estimates equal that filter's.
 
 Primary (Algorithm 2): predict, then update on its own measurement together with every transfer
 whose ``k_apply`` is k. With no transfer it is the isolated filter.
+
+A live tracker can miss a measurement (a partition, a lost packet): ``z=None`` then means a
+prediction-only step, so the filter stays on the clock instead of waiting forever.
 """
 
 from __future__ import annotations
@@ -27,10 +30,11 @@ class Source:
         self.R = R
         self._predicted = False
 
-    def step(self, z: Observation) -> tuple[Estimate, Observation]:
+    def step(self, z: Observation | None) -> tuple[Estimate, Observation]:
         if not self._predicted:
             self.filter.predict()
-        self.filter.update([z])
+        if z is not None:
+            self.filter.update([z])
         est = self.filter.estimate()
         self.filter.predict()
         self._predicted = True
@@ -43,7 +47,9 @@ class Primary:
     def __init__(self, filt: Filter) -> None:
         self.filter = filt
 
-    def step(self, z: Observation, transfers: Sequence[Observation] = ()) -> Estimate:
+    def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
         self.filter.predict()
-        self.filter.update([z, *transfers])
+        observations = [*([z] if z is not None else []), *transfers]
+        if observations:
+            self.filter.update(observations)
         return self.filter.estimate()
