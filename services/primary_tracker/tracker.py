@@ -50,6 +50,7 @@ class Episode:
     steps: StepQueue[Measurement] = field(default_factory=StepQueue)
     transfers: dict[int, dict[str, Transfer]] = field(default_factory=dict)
     ready_since: float | None = None  # when z_{next_k} was first ready (monotonic)
+    last_k: int | None = None  # set by EpisodeEnd
 
 
 class PrimaryTracker:
@@ -90,13 +91,14 @@ class PrimaryTracker:
             self.alive.discard(sid)
 
     def _on_episode(self, item: Received) -> None:
-        end = decode_received(item, EpisodeEnd, None)
-        if end is not None:
-            self.episodes.pop(end.episode, None)
+        msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+        if isinstance(msg, EpisodeEnd):
+            if (ended := self.episodes.get(msg.episode)) is not None:
+                ended.last_k = msg.steps_sent  # forgotten once its last step is taken
             return
-        start = decode_received(item, EpisodeStart, self.svc.rejects)
-        if start is None or start.episode in self.episodes:
+        if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
             return
+        start = msg
         cfg = start.parsed_config()
         while len(self.episodes) >= self.s.max_episodes:
             self.episodes.pop(next(iter(self.episodes)))
@@ -159,6 +161,8 @@ class PrimaryTracker:
                 ep.transfers.pop(z.k, None)
                 ep.ready_since = None
                 self._step(e, ep, z.k, z, z.t_sensor, have)
+            if ep.last_k is not None and ep.steps.next_k > ep.last_k:
+                del self.episodes[e]
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:

@@ -85,15 +85,13 @@ class Scorer:
             self._on_stats(item, info.operator, info.service)
 
     def _on_episode(self, item: Received) -> None:
-        end = decode_received(item, EpisodeEnd, None)
-        if end is not None:
-            self.store.episode_end(end)
-            self.ended[end.episode] = time.monotonic()
-            return
-        start = decode_received(item, EpisodeStart, self.svc.rejects)
-        if start is not None:
-            self.store.episode_start(start)
-            self.K[start.episode] = start.K
+        msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+        if isinstance(msg, EpisodeEnd):
+            self.store.episode_end(msg)
+            self.ended[msg.episode] = time.monotonic()
+        elif isinstance(msg, EpisodeStart):
+            self.store.episode_start(msg)
+            self.K[msg.episode] = msg.K
 
     def _on_stats(self, item: Received, operator: str, service: str) -> None:
         try:

@@ -38,6 +38,7 @@ class Episode:
     start: EpisodeStart
     tracker: SourceEpisode
     steps: StepQueue[Measurement]
+    last_k: int | None = None  # set by EpisodeEnd
 
 
 class SourceTracker:
@@ -59,13 +60,14 @@ class SourceTracker:
                 self._on_measurement(info.episode, item.key, msg)
 
     def _on_episode(self, item: Received) -> None:
-        end = decode_received(item, EpisodeEnd, None)
-        if end is not None:
-            self.episodes.pop(end.episode, None)
+        msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+        if isinstance(msg, EpisodeEnd):
+            if (ended := self.episodes.get(msg.episode)) is not None:
+                ended.last_k = msg.steps_sent  # forgotten once its last step is taken
             return
-        start = decode_received(item, EpisodeStart, self.svc.rejects)
-        if start is None or start.episode in self.episodes:
+        if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
             return
+        start = msg
         cfg = start.parsed_config()
         if self.s.source_id not in {src.id for src in cfg.sources}:
             log.info("episode %s has no source %s; ignored", start.episode, self.s.source_id)
@@ -95,6 +97,8 @@ class SourceTracker:
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
                 self._step(e, ep, z.k, z, z.t_sensor)
+            if ep.last_k is not None and ep.steps.next_k > ep.last_k:
+                del self.episodes[e]
 
     def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float) -> None:
         t0 = time.perf_counter()

@@ -348,8 +348,11 @@ def _reason_of(err: ValidationError) -> tuple[str, str]:
     return "invalid", detail
 
 
-def decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> M:
-    """Unpack and validate one ``expected_type`` message; only :class:`MessageRejected` escapes."""
+def decode(
+    payload: bytes | bytearray | memoryview, expected_type: type[M] | tuple[type[M], ...]
+) -> M:
+    """Unpack and validate one ``expected_type`` message (or one of a tuple of types, chosen by
+    the type tag); only :class:`MessageRejected` escapes."""
     try:
         return _decode(payload, expected_type)
     except MessageRejected:
@@ -358,7 +361,9 @@ def decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> M
         raise MessageRejected("internal", f"{type(err).__name__}: {err}") from None
 
 
-def _decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> M:
+def _decode(
+    payload: bytes | bytearray | memoryview, expected_type: type[M] | tuple[type[M], ...]
+) -> M:
     if not isinstance(payload, bytes | bytearray | memoryview):
         raise MessageRejected("bad_structure", f"payload is {type(payload).__name__}, not bytes")
     n = len(payload)
@@ -375,10 +380,13 @@ def _decode(payload: bytes | bytearray | memoryview, expected_type: type[M]) -> 
     if type(version) is not int or version not in SUPPORTED_VERSIONS:
         raise MessageRejected("unknown_version", f"schema_version {version!r}")
     tag = data.get("type")
-    if tag != expected_type.TYPE:
-        raise MessageRejected("wrong_type", f"type {tag!r}, expected {expected_type.TYPE!r}")
+    candidates = expected_type if isinstance(expected_type, tuple) else (expected_type,)
+    chosen = next((t for t in candidates if t.TYPE == tag), None)
+    if chosen is None:
+        wanted = " or ".join(repr(t.TYPE) for t in candidates)
+        raise MessageRejected("wrong_type", f"type {tag!r}, expected {wanted}")
     try:
-        return expected_type.model_validate(data, strict=True)
+        return chosen.model_validate(data, strict=True)
     except ValidationError as err:
         reason, detail = _reason_of(err)
         raise MessageRejected(reason, detail) from None

@@ -324,7 +324,9 @@ class Subscriber:
 
 
 def decode_received(
-    item: Received, expected_type: type[M], rejects: RejectCounter | None = None
+    item: Received,
+    expected_type: type[M] | tuple[type[M], ...],
+    rejects: RejectCounter | None = None,
 ) -> M | None:
     """Decode a queued sample; on rejection log it, count it under its key and return None."""
     if not item.is_put:
@@ -334,7 +336,7 @@ def decode_received(
     except MessageRejected as err:
         if rejects is not None:
             rejects.record(item.key, err)
-        log.warning("rejected %s on %s: %s", expected_type.__name__, item.key, err)
+        log.warning("rejected a payload on %s: %s", item.key, err)
         return None
 
 

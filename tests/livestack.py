@@ -1,0 +1,68 @@
+"""Real processes over loopback Zenoh for integration tests: a router, the services, a client."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sqlite3
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+from tltrack import demo
+
+SIM_DEFAULTS = {"preset": "arasaratnam-haykin", "truth": "fixed", "seed": 7}
+
+
+@contextlib.contextmanager
+def stack(tmp: Path) -> Iterator[demo.Stack]:
+    s = demo.Stack(f"tcp/127.0.0.1:{demo.free_port()}", tmp / "logs")
+    try:
+        yield s
+    finally:
+        codes = s.stop()
+        assert all(c is not None for c in codes.values()), f"processes left running: {codes}"
+
+
+def start_all(s: demo.Stack, db: Path, *, primary_env: dict[str, str] | None = None,
+              sim: list[str]) -> None:
+    s.start_router()
+    s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
+    s.start_service("primary_tracker", env=primary_env)
+    s.start_service("source_tracker")
+    s.start_service("sensor_sim", *sim)
+
+
+def sim_flags(steps: int, particles: int, pace: float = 0.0, **kw: Any) -> list[str]:
+    o = {**SIM_DEFAULTS, **kw}
+    return demo.sim_flags(steps, particles, pace, False, o["preset"], o["truth"], o["seed"],
+                          o.get("episodes", 1))
+
+
+def estimates(db: Path) -> dict[str, dict[int, tuple[list[float], bool]]]:
+    """filter -> k -> (x, transfer_used), as the scorer committed them."""
+    out: dict[str, dict[int, tuple[list[float], bool]]] = {}
+    if not db.exists():
+        return out
+    with contextlib.closing(sqlite3.connect(db)) as con:
+        try:
+            rows = con.execute("SELECT filter, k, x, transfer_used FROM estimates").fetchall()
+        except sqlite3.OperationalError:  # the scorer has not created its schema yet
+            return out
+    for name, k, x, used in rows:
+        out.setdefault(name, {})[k] = (json.loads(x), bool(used))
+    return out
+
+
+def logs(s: demo.Stack) -> str:
+    return "\n".join(f"--- {p.name}\n{p.read_text()[-3000:]}" for p in s.logs.glob("*.log"))
+
+
+def wait_until(pred: Any, timeout: float, every: float = 0.2) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(every)
+    return False
