@@ -1,0 +1,80 @@
+import json
+
+import numpy as np
+import pytest
+
+from tltrack.config import make_config
+from tltrack.engine import results
+from tltrack.engine.montecarlo import run_experiment, trace_run
+from tltrack.engine.scenario import simulate, truth
+
+FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
+
+
+def _cfg(**kw):
+    return make_config({"preset": "arasaratnam-haykin", "K": 15, "particles": 200, "runs": 7,
+                        "seed": 4, **kw})
+
+
+def test_same_seed_same_result_whatever_the_batch_size_or_worker_count():
+    """Batched BLAS may round the last bit differently for another batch shape; nothing more."""
+    cfg = _cfg()
+    base = run_experiment(cfg, FILTERS, batch_size=7, workers=1, time_steps=False)
+    for bs, workers in ((1, 1), (3, 2)):
+        other = run_experiment(cfg, FILTERS, batch_size=bs, workers=workers, time_steps=False)
+        for name in base:
+            np.testing.assert_allclose(base[name].run_mse, other[name].run_mse, rtol=1e-9)
+            np.testing.assert_allclose(base[name].rmse_per_step, other[name].rmse_per_step,
+                                       rtol=1e-9)
+
+
+def test_overall_rmse_is_the_papers_mean_of_per_step_rmse():
+    cfg = _cfg()
+    res = run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"]
+    per_run = {r: trace_run(cfg, ["pf"], r)["pf"] for r in range(cfg.runs)}
+    sq = np.array([[np.sum((per_run[r][k, [0, 2]] - truth(cfg, r)[k + 1, [0, 2]]) ** 2)
+                    for k in range(cfg.K)] for r in range(cfg.runs)])
+    np.testing.assert_allclose(res.rmse_per_step, np.sqrt(sq.mean(axis=0)), rtol=1e-12)
+    assert res.rmse_overall == pytest.approx(np.mean(np.sqrt(sq.mean(axis=0))))
+
+
+@pytest.mark.parametrize("mode", ["fixed", "random", "noise-free"])
+def test_truth_modes(mode):
+    cfg = _cfg(truth=mode)
+    a, b = truth(cfg, 0), truth(cfg, 1)
+    assert np.array_equal(a, b) == (mode != "random")
+    if mode == "noise-free":
+        assert a[:, 4].std() == 0.0  # the turn rate never changes
+    assert not np.array_equal(simulate(cfg, 0).z["primary"], simulate(cfg, 1).z["primary"])
+
+
+def test_transfer_helps_and_fusion_helps_more():
+    cfg = make_config(preset="arasaratnam-haykin", truth="noise-free", particles=1000, runs=16,
+                      K=40, seed=2)
+    res = run_experiment(cfg, ["pf", "tl-pf", "fusion-pf"], time_steps=False)
+    assert res["tl-pf"].rmse_overall < res["pf"].rmse_overall
+    assert res["fusion-pf"].rmse_overall < res["pf"].rmse_overall
+
+
+def test_results_document_has_the_contract_fields(tmp_path):
+    cfg = _cfg(runs=3)
+    doc = results.assemble(cfg, run_experiment(cfg, ["pf", "tl-pf"], workers=1))
+    path = results.write(doc, tmp_path)
+    back = json.loads(path.read_text())
+    assert back["schema_version"] == results.SCHEMA_VERSION
+    assert {"package_version", "git_commit", "numpy_version", "machine"} <= back["provenance"].keys()
+    assert set(back["filters"]) == {"pf", "tl-pf", "source-pf"}
+    for r in back["filters"].values():
+        assert len(r["rmse_per_step"]) == cfg.K
+        assert {"rmse_overall", "ms_per_step", "lost_fraction", "nees"} <= r.keys()
+        assert r["ms_per_step"] > 0
+    assert len(back["pcrlb"]["primary"]) == len(back["pcrlb"]["with_source"]) == cfg.K
+    assert all(w <= p for w, p in zip(back["pcrlb"]["with_source"], back["pcrlb"]["primary"],
+                                      strict=True))
+
+
+def test_lost_fraction_counts_runs_far_off_at_the_end():
+    cfg = _cfg(lost_threshold_m=1e-3)
+    assert run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"].lost_fraction == 1.0
+    cfg = _cfg(lost_threshold_m=1e6)
+    assert run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"].lost_fraction == 0.0
