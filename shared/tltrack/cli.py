@@ -33,14 +33,32 @@ def progress_bar(total: int, what: str) -> Progress:
 def build_config(config: Path | None, **overrides: Any) -> Config:
     """Preset/file first, then any option given on the command line; exits with the field named."""
     source_intensity = overrides.pop("source_intensity", None)
+    sources = overrides.pop("sources", None)
+    fault = overrides.pop("source_fault", None)
     try:
+        if sources is not None and source_intensity is not None:
+            raise ConfigError("--sources: give either --sources or --source-intensity, not both")
+        if sources is not None:
+            overrides["sources"] = _parse_sources(sources)
         cfg = load_config(config, **overrides) if config else make_config(**overrides)
         if source_intensity is not None:
             cfg = cfg.with_source_intensity(source_intensity)
+        if fault is not None:
+            first = {**cfg.sources[0].model_dump(), "fault": fault}
+            cfg = cfg.with_(sources=[first, *cfg.sources[1:]])
     except ConfigError as err:
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
     return cfg
+
+
+def _parse_sources(text: str) -> list[dict[str, Any]]:
+    """``"1,2,8"`` -> sources s1, s2, s3 at the origin with those noise intensities."""
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ConfigError(f"--sources: {text!r} is not a comma-separated list of numbers") from None
+    return [{"id": f"s{i + 1}", "intensity": v} for i, v in enumerate(values)]
 
 
 @app.command(
@@ -57,6 +75,12 @@ def experiment(
     particles: Annotated[int | None, typer.Option(help="particles per PF")] = None,
     runs: Annotated[int | None, typer.Option(help="Monte-Carlo runs")] = None,
     source_intensity: Annotated[float | None, typer.Option(help="I_w of the source")] = None,
+    sources: Annotated[str | None, typer.Option(
+        help="several sources at the origin, by intensity, e.g. 1,2,8")] = None,
+    source_fault: Annotated[str | None, typer.Option(
+        help="fault of the (first) source: none, bias, diverged or stale")] = None,
+    transfer_budget: Annotated[float | None, typer.Option(
+        help="robust-tl-*: at most this share of steps with a transfer")] = None,
     primary_intensity: Annotated[float | None, typer.Option(help="I_w of the primary")] = None,
     truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free")] = None,
     seed: Annotated[int | None, typer.Option(help="master seed of every random stream")] = None,
@@ -72,7 +96,8 @@ def experiment(
     cfg = build_config(
         config, scenario=scenario, preset=preset, particles=particles, runs=runs,
         source_intensity=source_intensity, primary_intensity=primary_intensity, truth=truth,
-        seed=seed, truth_seed=truth_seed,
+        seed=seed, truth_seed=truth_seed, sources=sources, source_fault=source_fault,
+        transfer_budget=transfer_budget,
     )
     names = [n.strip() for n in filters.split(",") if n.strip()]
     try:

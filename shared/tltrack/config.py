@@ -98,6 +98,12 @@ class Config(BaseModel):
     runs: int = Field(100, ge=1)
     kappa: float = Field(2.0, allow_inf_nan=False, description="UKF scaling parameter")
     lost_threshold_m: float = Field(100.0, gt=0, allow_inf_nan=False)
+    gate_probability: float = Field(
+        0.999, gt=0, lt=1, description="robust TL: probability an honest transfer passes the gate"
+    )
+    transfer_budget: float | None = Field(
+        None, gt=0, le=1, description="robust TL: at most this share of steps with a transfer"
+    )
 
     @model_validator(mode="before")
     @classmethod

@@ -24,7 +24,9 @@ from numpy.typing import NDArray
 from tltrack.config import Config
 from tltrack.engine.registry import FilterSpec, build, parse
 from tltrack.engine.scenario import PRIMARY, Run, intensity, sensor, simulate
+from tltrack.engine.faults import transfer_lag
 from tltrack.filters.base import Estimate
+from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models.motion import POS, motion_model
 from tltrack.models.observation import Observation
@@ -42,6 +44,7 @@ class FilterStats:
     run_mse: list[Array] = field(default_factory=list)  # per run: mean over k of squared error
     final_err: list[Array] = field(default_factory=list)  # per run: position error at k = K
     step_ms: list[float] = field(default_factory=list)
+    transfer_steps: int = 0  # run-steps whose update used at least one transfer
     tracks: list[Array] = field(default_factory=list)  # per batch, (K, B, n) means, on request
 
     def __post_init__(self) -> None:
@@ -54,13 +57,14 @@ class FilterStats:
         self.run_mse += other.run_mse
         self.final_err += other.final_err
         self.step_ms += other.step_ms
+        self.transfer_steps += other.transfer_steps
         self.tracks += other.tracks
 
 
 def expand(names: Sequence[str]) -> list[FilterSpec]:
     """The requested filters plus the source each TL filter needs, sources first."""
     specs = [parse(n) for n in dict.fromkeys(names)]
-    sources = [parse(s.source_name) for s in specs if s.role == "tl"]
+    sources = [parse(s.source_name) for s in specs if s.role in ("tl", "robust")]
     sources += [s for s in specs if s.role == "source"]
     others = [s for s in specs if s.role != "source"]
     return list({s.name: s for s in [*sources, *others]}.values())
@@ -83,7 +87,8 @@ class _Score:
         d = est.mean - truth_k  # (B, n)
         e2 = d[:, POS[0]] ** 2 + d[:, POS[1]] ** 2
         self.stats.sq_err[k - 1] += e2.sum()
-        nees = np.einsum("bi,bi->b", d, np.linalg.solve(est.cov, d[:, :, None])[:, :, 0])
+        # pinv: a collapsed particle cloud's covariance is the singular Q_v
+        nees = np.einsum("bi,bij,bj->b", d, np.linalg.pinv(est.cov, hermitian=True), d)
         self.stats.nees[k - 1] += nees.sum()
         self._sq.append(e2)
         if self._means is not None:
@@ -136,30 +141,35 @@ def run_batch(
                 sources[spec.name, sid] = Source(filt, *meas[sid])
                 scores[reported_name(spec, sid, len(source_ids))] = _Score(K, keep_tracks)
         else:
-            primaries[spec.name] = (spec, Primary(build(spec, cfg, model, x0_hat, runs)))
+            policy = (TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
+                      if spec.role == "robust" else None)
+            primaries[spec.name] = (spec, Primary(build(spec, cfg, model, x0_hat, runs), policy))
             scores[spec.name] = _Score(K, keep_tracks)
 
-    transfers: dict[str, list[Observation]] = {}  # source filter name -> transfers for step k
+    lag = {sid: transfer_lag(cfg, sid) for sid in source_ids}
+    made: dict[tuple[str, str], dict[int, Observation]] = {key: {} for key in sources}
     for k in range(1, K + 1):
-        upcoming: dict[str, list[Observation]] = {}
         for (name, sid), src in sources.items():
             t0 = time.perf_counter()
             est, transfer = src.step(observation(sid, k))
             label = reported_name(parse(name), sid, len(source_ids))
             _tick(scores[label], timing, t0)
             scores[label].add(k, est, truth[k])
-            upcoming.setdefault(name, []).append(transfer)
+            made[name, sid][k + 1] = transfer  # made at k, applies at k_apply = k + 1
+            made[name, sid].pop(k - lag[sid] - 1, None)
         for name, (spec, prim) in primaries.items():
             extra: list[Observation] = []
-            if spec.role == "tl":
-                extra = transfers.get(spec.source_name, [])  # none at k = 1
+            if spec.role in ("tl", "robust"):  # none at k = 1
+                extra = [t for sid in source_ids
+                         if (t := made[spec.source_name, sid].get(k - lag[sid])) is not None]
             elif spec.role == "fusion":
                 extra = [observation(sid, k) for sid in source_ids]
             t0 = time.perf_counter()
             est = prim.step(observation(PRIMARY, k), extra)
             _tick(scores[name], timing, t0)
             scores[name].add(k, est, truth[k])
-        transfers = upcoming
+            if prim.used is not None:
+                scores[name].stats.transfer_steps += int(prim.used.sum())
     return {name: s.close() for name, s in scores.items()}
 
 
@@ -182,6 +192,7 @@ class FilterResult:
     lost_fraction: float
     nees: float
     ms_per_step: float | None
+    transfer_rate: float  # share of run-steps whose update used a transfer
     run_mse: list[float]  # per run, for paired Monte-Carlo errors
 
     @classmethod
@@ -194,6 +205,7 @@ class FilterResult:
             lost_fraction=float(np.mean(~(final <= lost_threshold))),  # NaN counts as lost
             nees=float(s.nees.sum() / (runs * s.K)),
             ms_per_step=float(np.median(s.step_ms)) if s.step_ms else None,
+            transfer_rate=s.transfer_steps / (runs * s.K),
             run_mse=np.concatenate(s.run_mse).tolist(),
         )
 

@@ -7,7 +7,9 @@ A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, ``uk
 - ``tl-``: the primary with every source's transfer (Algorithm 2 / the stacked TL-KF update);
 - ``source-``: a source operator's filter (Algorithm 1), of the same kind as its TL primary;
 - ``fusion-``: centralized fusion, the primary given every source's *raw* measurement too. It is
-  the bound that transfer trades away for privacy.
+  the bound that transfer trades away for privacy;
+- ``robust-tl-``: TL that first decides which transfers to use (a consistency gate, and the
+  optional communication budget of the config), see :mod:`tltrack.filters.decision`.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, 
 from tltrack.models.motion import MotionModel
 
 Kind = Literal["pf", "ukf", "ckf3", "ckf5"]
-Role = Literal["isolated", "tl", "source", "fusion"]
+Role = Literal["isolated", "tl", "robust", "source", "fusion"]
 KINDS: tuple[Kind, ...] = ("pf", "ukf", "ckf3", "ckf5")
 _PREFIX: dict[str, Role] = {"tl": "tl", "source": "source", "fusion": "fusion"}
 
@@ -46,6 +48,8 @@ class FilterSpec:
 
 def parse(name: str) -> FilterSpec:
     """``"tl-ckf5"`` -> FilterSpec("tl-ckf5", "ckf5", "tl"); refuses unknown names clearly."""
+    if name.startswith("robust-tl-") and name[len("robust-tl-"):] in KINDS:
+        return FilterSpec(name, name[len("robust-tl-"):], "robust")  # type: ignore[arg-type]
     prefix, _, rest = name.partition("-")
     role: Role = "isolated"
     kind = name
@@ -59,7 +63,7 @@ def parse(name: str) -> FilterSpec:
 
 
 def all_names() -> list[str]:
-    names = [f"{p}{k}" for k in KINDS for p in ("", "tl-", "source-")]
+    names = [f"{p}{k}" for k in KINDS for p in ("", "tl-", "robust-tl-", "source-")]
     return [*names, "fusion-pf"]
 
 

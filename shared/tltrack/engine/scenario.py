@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.engine.faults import bearing_bias, observed_truth
 from tltrack.engine.streams import stream
 from tltrack.models.measurement import RangeBearing, wrap_angle
 from tltrack.models.motion import motion_model
@@ -61,10 +62,11 @@ def truth(cfg: Config, run: int) -> Array:
 def measurements(cfg: Config, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:
     """z_1..z_K of one sensor along truth ``x``, shape (K, 2), bearing wrapped to (-pi, pi]."""
     s = sensor(cfg, sensor_id)
-    L = np.linalg.cholesky(s.R(intensity(cfg, sensor_id)))
+    I_w = intensity(cfg, sensor_id)
+    L = np.linalg.cholesky(s.R(I_w))
     eps = stream(cfg.seed, run, f"meas/{sensor_id}").standard_normal((cfg.K, 2))
-    z = s.h(x[1:].T).T + eps @ L.T
-    z[:, 1] = wrap_angle(z[:, 1])
+    z = s.h(observed_truth(cfg, sensor_id, x)[1:].T).T + eps @ L.T
+    z[:, 1] = wrap_angle(z[:, 1] + bearing_bias(cfg, sensor_id, I_w))
     return z
 
 

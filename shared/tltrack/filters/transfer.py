@@ -16,7 +16,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+from numpy.typing import NDArray
+
 from tltrack.filters.base import Array, Estimate, Filter
+from tltrack.filters.decision import TransferPolicy
 from tltrack.models.measurement import RangeBearing
 from tltrack.models.observation import Observation
 
@@ -42,14 +46,34 @@ class Source:
 
 
 class Primary:
-    """Algorithm 2: ``step(z_k, transfers)``; an empty ``transfers`` is an isolated step."""
+    """Algorithm 2: ``step(z_k, transfers)``; an empty ``transfers`` is an isolated step.
 
-    def __init__(self, filt: Filter) -> None:
+    With a :class:`~tltrack.filters.decision.TransferPolicy` the primary first decides, per run,
+    which transfers to use (robust TL). :attr:`used` tells, per run, whether the last step used one.
+    """
+
+    def __init__(self, filt: Filter, policy: TransferPolicy | None = None) -> None:
         self.filter = filt
+        self.policy = policy
+        self.used: NDArray[np.bool_] | None = None
 
     def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
         self.filter.predict()
+        if self.policy is not None and transfers:
+            transfers = self.policy.select(z, transfers)
+        self.used = _any_applied(transfers)
         observations = [*([z] if z is not None else []), *transfers]
         if observations:
             self.filter.update(observations)
         return self.filter.estimate()
+
+
+def _any_applied(transfers: Sequence[Observation]) -> NDArray[np.bool_] | None:
+    """Per run: did at least one transfer apply? None when there were none at all."""
+    if not transfers:
+        return None
+    B = transfers[0].mean.shape[1]
+    used = np.zeros(B, dtype=bool)
+    for t in transfers:
+        used |= np.ones(B, dtype=bool) if t.mask is None else t.mask
+    return used

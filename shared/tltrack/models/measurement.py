@@ -61,6 +61,18 @@ class RangeBearing:
         b = np.arctan2(np.sin(Z[BEARING]).mean(axis=axis - 1), np.cos(Z[BEARING]).mean(axis=axis - 1))
         return np.stack([r, b])
 
+    def to_position(self, z: Array, P: Array) -> tuple[Array, Array]:
+        """Cartesian position (2, B) and its linearised covariance (B, 2, 2) of z (2, B), cov P.
+
+        It lets two sensors at different places be compared without any filter's prior.
+        """
+        r, b = z[0], z[BEARING]
+        c, s = np.cos(b), np.sin(b)
+        pos = np.stack([self.position[0] + r * c, self.position[1] + r * s])
+        J = np.empty((r.shape[0], 2, 2))
+        J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1] = c, -r * s, s, r * c
+        return pos, J @ P @ J.transpose(0, 2, 1)
+
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat with the bearing wrapped; measurement components on the first axis."""
         d = np.asarray(z, dtype=float) - zhat
