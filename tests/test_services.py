@@ -24,7 +24,8 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path):
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = demo.wait_for_scored(s.endpoint, 1, 60)
         assert summary is not None, logs(s)
-    cfg = make_config(preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N)
+    cfg = make_config(preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N,
+                      recovery=True)  # the trackers' default, as the engine's is off
     offline = trace_run(cfg, ["tl-pf", "pf", "source-pf"], run=0)
     live = estimates(db)
     for name in ("tl-pf", "pf", "source-pf"):

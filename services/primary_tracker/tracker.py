@@ -37,6 +37,7 @@ class Settings(BaseSettings):
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
     gap_timeout_s: float = Field(1.0, gt=0, description="step without a measurement missing this long")
+    recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1)
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
@@ -99,7 +100,7 @@ class PrimaryTracker:
         if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
             return
         start = msg
-        cfg = start.parsed_config()
+        cfg = start.parsed_config().with_(recovery=self.s.recovery)
         while len(self.episodes) >= self.s.max_episodes:
             self.episodes.pop(next(iter(self.episodes)))
         self.episodes[start.episode] = Episode(

@@ -27,6 +27,7 @@ class Settings(BaseSettings):
 
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
     gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
     log_level: str = "INFO"
@@ -68,7 +69,7 @@ class SourceTracker:
         if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
             return
         start = msg
-        cfg = start.parsed_config()
+        cfg = start.parsed_config().with_(recovery=self.s.recovery)
         if self.s.source_id not in {src.id for src in cfg.sources}:
             log.info("episode %s has no source %s; ignored", start.episode, self.s.source_id)
             return

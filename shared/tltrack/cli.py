@@ -86,6 +86,8 @@ def experiment(
     seed: Annotated[int | None, typer.Option(help="master seed of every random stream")] = None,
     truth_seed: Annotated[int | None, typer.Option(help="seed of the fixed truth")] = None,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/experiment"),
+    recovery: Annotated[bool | None, typer.Option(
+        "--recovery/--no-recovery", help="reinitialise lost particle filters (default: off)")] = None,
     workers: Annotated[int | None, typer.Option(help="worker processes (default: all cores)")] = None,
     batch_size: Annotated[int | None, typer.Option(help="runs per vectorised batch")] = None,
 ) -> None:
@@ -97,7 +99,7 @@ def experiment(
         config, scenario=scenario, preset=preset, particles=particles, runs=runs,
         source_intensity=source_intensity, primary_intensity=primary_intensity, truth=truth,
         seed=seed, truth_seed=truth_seed, sources=sources, source_fault=source_fault,
-        transfer_budget=transfer_budget,
+        transfer_budget=transfer_budget, recovery=recovery,
     )
     names = [n.strip() for n in filters.split(",") if n.strip()]
     try:

@@ -101,6 +101,7 @@ class Config(BaseModel):
     gate_probability: float = Field(
         0.999, gt=0, lt=1, description="robust TL: probability an honest transfer passes the gate"
     )
+    recovery: bool = Field(False, description="reinitialise a particle filter that lost track")
     transfer_budget: float | None = Field(
         None, gt=0, le=1, description="robust TL: at most this share of steps with a transfer"
     )

@@ -14,7 +14,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from tltrack.config import Config
-from tltrack.engine.registry import build, parse
+from tltrack.engine.registry import build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.transfer import Primary, Source
@@ -49,7 +49,8 @@ class SourceEpisode:
         self.name = f"source-{kind}"
         s = sensor(cfg, source_id)
         filt = _filter(cfg, self.name, run, source_id)
-        self.role = Source(filt, s, s.R(intensity(cfg, source_id)))
+        self.role = Source(filt, s, s.R(intensity(cfg, source_id)),
+                           recovery(parse(self.name), cfg))
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
@@ -62,8 +63,9 @@ class PrimaryEpisode:
     def __init__(self, cfg: Config, run: int, kind: str) -> None:
         self.cfg = cfg
         self.tl_name, self.iso_name = f"tl-{kind}", kind
-        self.tl = Primary(_filter(cfg, self.tl_name, run))
-        self.iso = Primary(_filter(cfg, self.iso_name, run))
+        self.tl = Primary(_filter(cfg, self.tl_name, run), None, recovery(parse(self.tl_name), cfg))
+        self.iso = Primary(_filter(cfg, self.iso_name, run), None,
+                           recovery(parse(self.iso_name), cfg))
 
     def step(
         self, z: Measurement | None, transfers: dict[str, Transfer]

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.registry import FilterSpec, build, parse
+from tltrack.engine.registry import FilterSpec, build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, Run, intensity, sensor, simulate
 from tltrack.engine.faults import transfer_lag
 from tltrack.filters.base import Estimate
@@ -88,7 +88,7 @@ class _Score:
         e2 = d[:, POS[0]] ** 2 + d[:, POS[1]] ** 2
         self.stats.sq_err[k - 1] += e2.sum()
         # pinv: a collapsed particle cloud's covariance is the singular Q_v
-        nees = np.einsum("bi,bij,bj->b", d, np.linalg.pinv(est.cov, hermitian=True), d)
+        nees = np.einsum("bi,bij,bj->b", d, np.linalg.pinv(est.cov, rcond=1e-10, hermitian=True), d)
         self.stats.nees[k - 1] += nees.sum()
         self._sq.append(e2)
         if self._means is not None:
@@ -138,12 +138,13 @@ def run_batch(
         if spec.role == "source":
             for sid in source_ids:
                 filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
-                sources[spec.name, sid] = Source(filt, *meas[sid])
+                sources[spec.name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
                 scores[reported_name(spec, sid, len(source_ids))] = _Score(K, keep_tracks)
         else:
             policy = (TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
                       if spec.role == "robust" else None)
-            primaries[spec.name] = (spec, Primary(build(spec, cfg, model, x0_hat, runs), policy))
+            primaries[spec.name] = (spec, Primary(build(spec, cfg, model, x0_hat, runs), policy,
+                                                  recovery(spec, cfg)))
             scores[spec.name] = _Score(K, keep_tracks)
 
     lag = {sid: transfer_lag(cfg, sid) for sid in source_ids}

@@ -25,6 +25,7 @@ from tltrack.config import Config
 from tltrack.engine.streams import streams
 from tltrack.filters.base import Filter
 from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.recovery import Recovery
 from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, unscented
 from tltrack.models.motion import MotionModel
 
@@ -70,6 +71,11 @@ def all_names() -> list[str]:
 def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
     """The random-stream purpose of a filter; a source's carries its operator id."""
     return f"{spec.name}/{source_id}" if spec.role == "source" else spec.name
+
+
+def recovery(spec: FilterSpec, cfg: Config) -> Recovery | None:
+    """The lost-track recovery of a particle filter, when the config asks for it."""
+    return Recovery(np.diag(cfg.P0_diag)) if cfg.recovery and spec.kind == "pf" else None
 
 
 def build(

@@ -14,7 +14,8 @@ prediction-only step, so the filter stays on the clock instead of waiting foreve
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,20 +25,28 @@ from tltrack.filters.decision import TransferPolicy
 from tltrack.models.measurement import RangeBearing
 from tltrack.models.observation import Observation
 
+#: Reinitialises the lost runs of a filter around a measurement (see tltrack.filters.recovery).
+Recover = Callable[[Any, Observation], Any]
+
 
 class Source:
     """Algorithm 1: ``step(z_k)`` returns the estimate at k and the transfer for k + 1."""
 
-    def __init__(self, filt: Filter, sensor: RangeBearing, R: Array) -> None:
+    def __init__(
+        self, filt: Filter, sensor: RangeBearing, R: Array, recover: Recover | None = None
+    ) -> None:
         self.filter = filt
         self.sensor = sensor
         self.R = R
+        self.recover = recover
         self._predicted = False
 
     def step(self, z: Observation | None) -> tuple[Estimate, Observation]:
         if not self._predicted:
             self.filter.predict()
         if z is not None:
+            if self.recover is not None:
+                self.recover(self.filter, z)
             self.filter.update([z])
         est = self.filter.estimate()
         self.filter.predict()
@@ -52,13 +61,18 @@ class Primary:
     which transfers to use (robust TL). :attr:`used` tells, per run, whether the last step used one.
     """
 
-    def __init__(self, filt: Filter, policy: TransferPolicy | None = None) -> None:
+    def __init__(
+        self, filt: Filter, policy: TransferPolicy | None = None, recover: Recover | None = None
+    ) -> None:
         self.filter = filt
         self.policy = policy
+        self.recover = recover
         self.used: NDArray[np.bool_] | None = None
 
     def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
         self.filter.predict()
+        if self.recover is not None and z is not None:
+            self.recover(self.filter, z)
         if self.policy is not None and transfers:
             transfers = self.policy.select(z, transfers)
         self.used = _any_applied(transfers)
