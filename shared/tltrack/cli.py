@@ -239,3 +239,26 @@ def demo(
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1))
         console.print(f"wrote {json_out}")
+
+
+@app.command(
+    epilog="Examples:\n\n    tltrack study robust --runs 200\n\n"
+    "    tltrack study sources --runs 200 --out out/studies"
+)
+def study(
+    name: Annotated[str, typer.Argument(help="robust, sources or budget")],
+    runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
+    out: Annotated[Path, typer.Option(help="output directory")] = Path("out/studies"),
+) -> None:
+    """Faulty sources (robust), several sources, or the communication budget: markdown + plots."""
+    from tltrack import studies
+
+    runner = {"robust": studies.robust, "sources": studies.sources, "budget": studies.budget}
+    if name not in runner:
+        console.print(f"[red]error:[/red] unknown study {name!r}; use {', '.join(runner)}")
+        raise typer.Exit(2)
+    with progress_bar(runs, name) as bar:
+        task = bar.add_task(name, total=None)
+        path = runner[name](runs, out, progress=lambda n: bar.advance(task, n))
+    console.print(Path(path).read_text())
+    console.print(f"wrote {path}")

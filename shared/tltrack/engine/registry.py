@@ -69,8 +69,13 @@ def all_names() -> list[str]:
 
 
 def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
-    """The random-stream purpose of a filter; a source's carries its operator id."""
-    return f"{spec.name}/{source_id}" if spec.role == "source" else spec.name
+    """The random-stream purpose of a filter; a source's carries its operator id.
+
+    The primary's variants of one kind (isolated, TL, robust, fusion) share their numbers: common
+    random numbers, so that a run where the transfer changes nothing gives the isolated result
+    exactly, and paired differences between them measure the transfer, not the dice.
+    """
+    return f"{spec.name}/{source_id}" if spec.role == "source" else spec.kind
 
 
 def recovery(spec: FilterSpec, cfg: Config) -> Recovery | None:

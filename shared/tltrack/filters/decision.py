@@ -10,9 +10,10 @@ in Cartesian coordinates, linearised (which also covers sensors at different pla
 
 The test uses no filter prior on purpose: gating against the primary's own prediction lets a
 biased source that got in once drag the prior along and then always look consistent. A step uses a
-transfer when its NIS and the mean NIS over the last ``window`` steps both pass chi-square gates
-at ``probability``, and only once ``min_evidence`` steps have been seen; the window catches a bias
-too small to see in one step. A transfer that passes is still tempered in the spirit of Papež &
+transfer when three chi-square gates at ``probability`` pass, once ``min_evidence`` steps have been
+seen: its own NIS; the mean NIS over the last ``window`` steps (an overconfident P_eta); and the
+mean disagreement over the window, n d_bar' S_bar^-1 d_bar ~ chi2(2), which catches a bias or a
+slow drift long before it shows in a single step. A transfer that passes is still tempered in the spirit of Papež &
 Quinn's robust transfer: P_eta_eta is inflated by the window's mean NIS over its expected value 2,
 when that exceeds 1, so a source drifting off pulls less and less before the gate shuts.
 
@@ -35,12 +36,16 @@ from tltrack.models.observation import Observation
 Array = NDArray[np.float64]
 
 
-def disagreement(transfer: Observation, z: Observation) -> Array:
-    """NIS_k per run (B,) between a transfer and the primary's measurement of the same step."""
+def disagreement(transfer: Observation, z: Observation) -> tuple[Array, Array]:
+    """d_k (B, 2) and S_k (B, 2, 2) between a transfer and the primary's z_k, in x-y."""
     p_t, S_t = transfer.sensor.to_position(transfer.mean, transfer.cov)
     p_z, S_z = z.sensor.to_position(z.mean, z.cov)
-    d = (p_t - p_z).T  # (B, 2)
-    return np.einsum("bi,bi->b", d, np.linalg.solve(S_t + S_z, d[:, :, None])[:, :, 0])
+    return (p_t - p_z).T, S_t + S_z
+
+
+def nis(d: Array, S: Array) -> Array:
+    """d' S^-1 d per run."""
+    return np.einsum("bi,bi->b", d, np.linalg.solve(S, d[:, :, None])[:, :, 0])
 
 
 @dataclass
@@ -53,7 +58,7 @@ class TransferPolicy:
     min_evidence: int = 3
     steps: int = 0
     used: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    _history: dict[int, deque[Array]] = field(default_factory=dict)
+    _history: dict[int, deque[tuple[Array, Array]]] = field(default_factory=dict)
 
     def select(self, z: Observation | None, transfers: Sequence[Observation]) -> list[Observation]:
         """The transfers to use at this step, each with a mask of the runs that use it."""
@@ -65,17 +70,21 @@ class TransferPolicy:
                 self.used = np.zeros(B, dtype=np.int64)
             hist = self._history.setdefault(i, deque(maxlen=self.window))
             keep = np.ones(B, dtype=bool) if t.mask is None else t.mask.copy()
+            gate = chi2.ppf(self.probability, 2)
             if z is not None:
-                nis = disagreement(t, z)
-                keep &= nis <= chi2.ppf(self.probability, 2)
-                hist.append(nis)
+                d, S = disagreement(t, z)
+                keep &= nis(d, S) <= gate
+                hist.append((d, S))
             n = len(hist)
             if n < self.min_evidence:
                 keep[:] = False  # not enough evidence about this source yet
                 mean_nis = np.full(B, 2.0)
             else:
-                mean_nis = np.mean(hist, axis=0)
+                mean_nis = np.mean([nis(d, S) for d, S in hist], axis=0)
                 keep &= mean_nis <= chi2.ppf(self.probability, 2 * n) / n
+                d_bar = np.mean([d for d, _ in hist], axis=0)
+                S_bar = np.mean([S for _, S in hist], axis=0)
+                keep &= n * nis(d_bar, S_bar) <= gate
             if self.budget is not None:
                 keep &= self.used + 1 <= self.budget * self.steps
             self.used += keep
