@@ -262,3 +262,25 @@ def study(
         path = runner[name](runs, out, progress=lambda n: bar.advance(task, n))
     console.print(Path(path).read_text())
     console.print(f"wrote {path}")
+
+
+@app.command("bench-live")
+def bench_live(
+    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
+    pace: Annotated[float, typer.Option(help="steps/s for the latency run")] = 50.0,
+    steps: Annotated[int, typer.Option(help="steps per episode")] = 500,
+    rates: Annotated[str, typer.Option(help="step rates to try, ascending")] = "100,200,300,500,800",
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
+) -> None:
+    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate.
+
+    Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
+    """
+    from tltrack import livebench
+
+    result = livebench.run(particles, pace, steps, [float(r) for r in rates.split(",")])
+    text = json.dumps(result, indent=1)
+    console.print(text)
+    if json_out:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(text)
