@@ -15,12 +15,12 @@ from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-
 from tltrack import keys
+from tltrack.config import Config
 from tltrack.filters.base import Estimate
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import PrimaryEpisode, StepQueue, warm_up
+from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, warm_up
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -36,7 +36,9 @@ class Settings(BaseSettings):
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
-    gap_timeout_s: float = Field(1.0, gt=0, description="step without a measurement missing this long")
+    gap_timeout_s: float = Field(
+        1.0, gt=0, description="step without a measurement missing this long"
+    )
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1)
     log_level: str = "INFO"
@@ -51,29 +53,28 @@ class Episode:
     steps: StepQueue[Measurement] = field(default_factory=StepQueue)
     transfers: dict[int, dict[str, Transfer]] = field(default_factory=dict)
     ready_since: float | None = None  # when z_{next_k} was first ready (monotonic)
-    last_k: int | None = None  # set by EpisodeEnd
 
 
 class PrimaryTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        self.episodes: dict[str, Episode] = {}
+        self.episodes: Episodes[Episode] = Episodes(settings.max_episodes, self._open)
         self.alive: set[str] = set()  # source ids whose tracker token is up
         self.seen: set[str] = set()  # ... or ever was
 
     # ---- inputs ---------------------------------------------------------------------------
 
     def handle(self, item: Received) -> None:
-        try:
-            info = keys.parse(item.key)
-        except ValueError:
-            self.svc.rejects.add(item.key, "bad_key")
+        info = self.svc.key_info(item)
+        if info is None:
             return
         if info.kind == "alive" and info.source is not None:
             if info.service == SOURCE_TRACKER:
                 self._on_liveliness(info.source, item.is_put)
         elif info.kind == "episode":
-            self._on_episode(item)
+            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+            if msg is not None:
+                self.episodes.on_message(msg, self.s.recovery)
         elif info.kind == "primary_meas" and info.episode is not None:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
@@ -91,23 +92,11 @@ class PrimaryTracker:
         else:
             self.alive.discard(sid)
 
-    def _on_episode(self, item: Received) -> None:
-        msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
-        if isinstance(msg, EpisodeEnd):
-            if (ended := self.episodes.get(msg.episode)) is not None:
-                ended.last_k = msg.steps_sent  # forgotten once its last step is taken
-            return
-        if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
-            return
-        start = msg
-        cfg = start.parsed_config().with_(recovery=self.s.recovery)
-        while len(self.episodes) >= self.s.max_episodes:
-            self.episodes.pop(next(iter(self.episodes)))
-        self.episodes[start.episode] = Episode(
-            start, PrimaryEpisode(cfg, start.run, self.s.filter), [s.id for s in cfg.sources]
-        )
+    def _open(self, start: EpisodeStart, cfg: Config) -> Episode:
         log.info("episode %s (run %d): tl-%s and %s", start.episode, start.run, self.s.filter,
                  self.s.filter)
+        return Episode(start, PrimaryEpisode(cfg, start.run, self.s.filter),
+                       [s.id for s in cfg.sources])
 
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
@@ -140,7 +129,7 @@ class PrimaryTracker:
     def advance(self) -> float | None:
         """Take every step that can be taken; the seconds until the next deadline, if any."""
         wait: float | None = None
-        for e, ep in list(self.episodes.items()):
+        for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
                 for k in ep.steps.skip():
                     log.warning("episode %s: no measurement for step %d; transfer only", e, k)
@@ -150,7 +139,8 @@ class PrimaryTracker:
                 if ep.ready_since is None:
                     ep.ready_since = now
                 have = ep.transfers.get(z.k, {}) if z.k > 1 else {}
-                waiting = [sid for sid in ep.sources if sid not in have and self._worth_waiting(sid)]
+                waiting = [sid for sid in ep.sources
+                           if sid not in have and self._worth_waiting(sid)]
                 if waiting and z.k > 1 and not self.s.lockstep:
                     left = ep.ready_since + self.s.deadline_ms / 1e3 - now
                     if left > 0:
@@ -162,8 +152,7 @@ class PrimaryTracker:
                 ep.transfers.pop(z.k, None)
                 ep.ready_since = None
                 self._step(e, ep, z.k, z, z.t_sensor, have)
-            if ep.last_k is not None and ep.steps.next_k > ep.last_k:
-                del self.episodes[e]
+            self.episodes.retire(e, ep.steps.next_k)
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:

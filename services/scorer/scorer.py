@@ -16,14 +16,14 @@ from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-
-from services.scorer.store import Store
-from services.scorer.summary import summarize
 from tltrack import keys
 from tltrack.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.summary import print_summary
 from tltrack.transport import Queryable, Received, ZenohSettings, decode_received
+
+from services.scorer.store import Store
+from services.scorer.summary import summarize
 
 log = logging.getLogger("scorer")
 NAME = "scorer"
@@ -65,10 +65,8 @@ class Scorer:
             self._summary = json.dumps(summary).encode()
 
     def handle(self, item: Received) -> None:
-        try:
-            info = keys.parse(item.key)
-        except ValueError:
-            self.svc.rejects.add(item.key, "bad_key")
+        info = self.svc.key_info(item)
+        if info is None:
             return
         if info.kind == "episode":
             self._on_episode(item)

@@ -12,9 +12,9 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+from tltrack.models.motion import POS
 
 from services.scorer.store import Store
-from tltrack.models.motion import POS
 
 
 def _percentiles(ms: list[float]) -> dict[str, float | None]:

@@ -18,14 +18,14 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-
-from services.sensor_sim import replay
 from tltrack import keys
 from tltrack.config import Config, ConfigError, load_config, make_config
 from tltrack.engine.scenario import PRIMARY, simulate
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.transport import LivelinessWatcher, ZenohSettings
+
+from services.sensor_sim import replay
 
 log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"
@@ -60,9 +60,11 @@ class Settings(BaseSettings):
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
     def experiment_config(self) -> Config:
-        over: dict[str, Any] = {"scenario": self.scenario, "preset": self.preset, "truth": self.truth,
-                "seed": self.seed, "K": self.steps, "particles": self.particles,
-                "primary_intensity": self.primary_intensity}
+        over: dict[str, Any] = {
+            "scenario": self.scenario, "preset": self.preset, "truth": self.truth,
+            "seed": self.seed, "K": self.steps, "particles": self.particles,
+            "primary_intensity": self.primary_intensity,
+        }
         return load_config(self.config, **over) if self.config else make_config(**over)
 
 

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-
 from tltrack import keys
+from tltrack.config import Config
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import SourceEpisode, StepQueue, warm_up
+from tltrack.tracking import Episodes, SourceEpisode, StepQueue, warm_up
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("source_tracker")
@@ -38,46 +38,34 @@ class Settings(BaseSettings):
 class Episode:
     start: EpisodeStart
     tracker: SourceEpisode
-    steps: StepQueue[Measurement]
-    last_k: int | None = None  # set by EpisodeEnd
+    steps: StepQueue[Measurement] = field(default_factory=StepQueue)
 
 
 class SourceTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        self.episodes: dict[str, Episode] = {}
+        self.episodes: Episodes[Episode] = Episodes(settings.max_episodes, self._open)
 
     def handle(self, item: Received) -> None:
-        try:
-            info = keys.parse(item.key)
-        except ValueError:
-            self.svc.rejects.add(item.key, "bad_key")
+        info = self.svc.key_info(item)
+        if info is None:
             return
         if info.kind == "episode":
-            self._on_episode(item)
+            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+            if msg is not None:
+                self.episodes.on_message(msg, self.s.recovery)
         elif info.kind == "source_meas" and info.episode is not None:
             msg = decode_received(item, Measurement, self.svc.rejects)
             if msg is not None:
                 self._on_measurement(info.episode, item.key, msg)
 
-    def _on_episode(self, item: Received) -> None:
-        msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
-        if isinstance(msg, EpisodeEnd):
-            if (ended := self.episodes.get(msg.episode)) is not None:
-                ended.last_k = msg.steps_sent  # forgotten once its last step is taken
-            return
-        if not isinstance(msg, EpisodeStart) or msg.episode in self.episodes:
-            return
-        start = msg
-        cfg = start.parsed_config().with_(recovery=self.s.recovery)
+    def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         if self.s.source_id not in {src.id for src in cfg.sources}:
             log.info("episode %s has no source %s; ignored", start.episode, self.s.source_id)
-            return
-        while len(self.episodes) >= self.s.max_episodes:
-            self.episodes.pop(next(iter(self.episodes)))
+            return None
         tracker = SourceEpisode(cfg, start.run, self.s.filter, self.s.source_id)
-        self.episodes[start.episode] = Episode(start, tracker, StepQueue())
         log.info("episode %s (run %d): %s", start.episode, start.run, tracker.name)
+        return Episode(start, tracker)
 
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
@@ -90,7 +78,7 @@ class SourceTracker:
 
     def advance(self) -> None:
         """Step on every measurement in order; predict through steps missing too long."""
-        for e, ep in list(self.episodes.items()):
+        for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
                 for k in ep.steps.skip():
                     log.warning("episode %s: no measurement for step %d; predicting", e, k)
@@ -98,8 +86,7 @@ class SourceTracker:
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
                 self._step(e, ep, z.k, z, z.t_sensor)
-            if ep.last_k is not None and ep.steps.next_k > ep.last_k:
-                del self.episodes[e]
+            self.episodes.retire(e, ep.steps.next_k)
 
     def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float) -> None:
         t0 = time.perf_counter()

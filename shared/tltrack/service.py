@@ -27,7 +27,14 @@ from pydantic_settings import BaseSettings
 from tltrack import keys
 from tltrack.config import describe_validation_error
 from tltrack.messages import DuplicateFilter, Message, RejectCounter
-from tltrack.transport import Publisher, Received, Subscriber, ZenohSettings, declare_token, open_session
+from tltrack.transport import (
+    Publisher,
+    Received,
+    Subscriber,
+    ZenohSettings,
+    declare_token,
+    open_session,
+)
 
 log = logging.getLogger(__name__)
 
@@ -95,6 +102,14 @@ class Service:
         if pub is None:
             pub = self._pubs[key] = Publisher(self.session, key)
         pub.put(msg)
+
+    def key_info(self, item: Received) -> keys.KeyInfo | None:
+        """What the sample's key names; a key outside the layout is counted as rejected."""
+        try:
+            return keys.parse(item.key)
+        except ValueError:
+            self.rejects.add(item.key, "bad_key")
+            return None
 
     def count(self, what: str, n: int = 1) -> None:
         self.counters[what] = self.counters.get(what, 0) + n

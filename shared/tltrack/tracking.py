@@ -9,6 +9,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -18,7 +19,7 @@ from tltrack.engine.registry import build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.transfer import Primary, Source
-from tltrack.messages import Measurement, Transfer
+from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Message, Transfer
 from tltrack.models.motion import motion_model
 from tltrack.models.observation import Observation
 
@@ -148,3 +149,48 @@ def warm_up(kind: str) -> None:
         t = Transfer(episode="warmup", sender=sid, k=k, t_sensor=0.0, k_apply=k + 1,
                      eta=eta.mean[:, 0], P_eta=eta.cov[0])
         prim.step(z[PRIMARY], {sid: t})
+
+
+class Episodes(Generic[T]):
+    """The episodes a tracker follows, each with its state ``T``.
+
+    An :class:`EpisodeStart` opens one (through ``open``, which may decline with None); an
+    :class:`EpisodeEnd` marks its last step, and :meth:`retire` forgets it once that step is taken.
+    At most ``capacity`` are kept; the oldest goes first, so a flood of episodes is bounded.
+    """
+
+    def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], T | None]) -> None:
+        self.capacity = capacity
+        self._open = open
+        self._state: dict[str, T] = {}
+        self._last_k: dict[str, int] = {}
+
+    def on_message(self, msg: Message, recovery: bool) -> None:
+        """Open or end an episode; ``recovery`` is the tracker's own setting, not the episode's."""
+        if isinstance(msg, EpisodeEnd):
+            if msg.episode in self._state:
+                self._last_k[msg.episode] = msg.steps_sent
+            return
+        if not isinstance(msg, EpisodeStart) or msg.episode in self._state:
+            return
+        state = self._open(msg, msg.parsed_config().with_(recovery=recovery))
+        if state is None:
+            return
+        while len(self._state) >= self.capacity:
+            oldest = next(iter(self._state))
+            self._state.pop(oldest)
+            self._last_k.pop(oldest, None)
+        self._state[msg.episode] = state
+
+    def get(self, e: str) -> T | None:
+        return self._state.get(e)
+
+    def items(self) -> list[tuple[str, T]]:
+        return list(self._state.items())
+
+    def retire(self, e: str, next_k: int) -> None:
+        """Forget episode ``e`` if it has ended and its last step is behind ``next_k``."""
+        last = self._last_k.get(e)
+        if last is not None and next_k > last:
+            del self._state[e]
+            del self._last_k[e]
