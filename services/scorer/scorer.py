@@ -44,6 +44,7 @@ class Scorer:
     def __init__(self, settings: Settings, svc: Service, store: Store) -> None:
         self.s, self.svc, self.store = settings, svc, store
         self.K: dict[str, int] = {}
+        self.expected: dict[str, int] = {}  # filters per episode: one per source, TL, isolated
         self.ended: dict[str, float] = {}  # episode -> monotonic time of its end
         self.last_seen: dict[str, float] = {}
         self.counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
@@ -90,6 +91,7 @@ class Scorer:
         elif isinstance(msg, EpisodeStart):
             self.store.episode_start(msg)
             self.K[msg.episode] = msg.K
+            self.expected[msg.episode] = 2 + len(msg.config.get("sources", []))
 
     def _on_stats(self, item: Received, operator: str, service: str) -> None:
         try:
@@ -108,7 +110,8 @@ class Scorer:
         now = time.monotonic()
         for e, t_end in list(self.ended.items()):
             K, counts = self.K.get(e), self.counts.get(e, {})
-            complete = K is not None and counts and all(n >= K for n in counts.values())
+            complete = (K is not None and len(counts) >= self.expected.get(e, 3)
+                        and all(n >= K for n in counts.values()))
             quiet = now - max(t_end, self.last_seen.get(e, t_end)) > self.s.grace_s
             if complete or quiet:
                 del self.ended[e]

@@ -193,7 +193,8 @@ def router(
 
 @app.command(
     epilog="Examples:\n\n    tltrack demo\n\n    tltrack demo --steps 50 --particles 2000 "
-    "--json /tmp/d.json\n\n    tltrack demo --realtime"
+    "--json /tmp/d.json\n\n    tltrack demo --realtime\n\n    tltrack demo --serve   "
+    "# then open http://127.0.0.1:8050/ ; Ctrl-C stops everything"
 )
 def demo(
     steps: Annotated[int, typer.Option(help="steps K of the episode")] = 100,
@@ -205,6 +206,11 @@ def demo(
     truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "fixed",
     seed: Annotated[int, typer.Option(help="master seed")] = 0,
     out: Annotated[Path, typer.Option(help="logs and the scorer's database")] = Path("out/demo"),
+    serve: Annotated[
+        bool, typer.Option(help="also run the live dashboard; keep everything up until Ctrl-C")
+    ] = False,
+    port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
+    host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
 ) -> None:
     """Start the router and the four services on loopback, run one episode, print the summary."""
     from tltrack import demo as d
@@ -220,8 +226,21 @@ def demo(
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         stack.start_service("primary_tracker")
         stack.start_service("source_tracker")
+        sim_env: dict[str, str] | None = None
+        page = ""
+        if serve:
+            from services.dashboard import launch
+
+            page = launch.start(stack, port, host)
+            if not launch.wait_ready(page, 30):
+                console.print(f"[red]error:[/red] the dashboard did not start (port {port} "
+                              f"taken?); see {out / 'logs' / 'dashboard.log'}")
+                raise typer.Exit(1)
+            sim_env = launch.sim_env()  # sensor_sim also waits for the dashboard: no step missed
+            console.print(f"dashboard: [bold]{page}[/bold]  (Prometheus metrics: {page}metrics)")
         stack.start_service("sensor_sim",
-                            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed))
+                            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed),
+                            env=sim_env)
         budget = steps * (1.0 if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
         with progress_bar(steps, "episode") as bar:
             task = bar.add_task("episode", total=None)
@@ -231,10 +250,17 @@ def demo(
             console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)
         summary = d.wait_for_scored(endpoint, 1, 120)
+        if serve and summary is not None:
+            print_summary(summary)
+            console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")
+            d.serve_until_interrupted(stack, "dashboard")
     if summary is None:
         console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
         raise typer.Exit(1)
-    print_summary(summary)
+    if not serve:
+        print_summary(summary)
+        console.print("live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
+                      "(Prometheus metrics at /metrics)")
     if json_out:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1))

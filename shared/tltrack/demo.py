@@ -119,6 +119,25 @@ def wait_for_scored(endpoint: str, episodes: int, timeout: float) -> dict[str, A
     return None
 
 
+def serve_until_interrupted(stack: Stack, name: str) -> None:
+    """Keep the stack up until Ctrl-C or SIGTERM (or until ``name`` dies).
+
+    A shell's background job ignores SIGINT, and a bare SIGTERM would orphan the children (each
+    runs in its own session), so both become KeyboardInterrupt here and the stack shuts down.
+    """
+
+    def _stop(_signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _stop)
+    try:
+        while stack.procs[name].poll() is None:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+
+
 def sim_flags(steps: int, particles: int, pace: float, realtime: bool, preset: str,
               truth: str, seed: int, episodes: int = 1) -> list[str]:
     flags = [f"--steps={steps}", f"--particles={particles}", f"--pace={pace}",

@@ -1,0 +1,387 @@
+"""What the dashboard remembers: the last few episodes' truth and estimates, and the services'
+liveliness and statistics.
+
+Every input comes off the network, so everything is bounded: episodes (oldest evicted), estimate
+streams per episode, steps per stream, services, and the keys of a service's statistics. The first
+value of a step wins, as in the scorer's store, so a replayed message changes nothing.
+
+RMSE follows the scorer for one episode: RMSE(k) is the position error at step k and the
+episode's RMSE is its mean over k, so the page and ``/metrics`` agree with the scorer's table.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.models.motion import POS
+
+Role = Literal["source", "tl", "isolated"]
+Verdict = Literal["new", "duplicate", "capacity"]
+XY = tuple[float, float]
+
+MAX_SERVICES = 64
+MAX_STATS_ENTRIES = 256  #: keys kept per mapping in a service's statistics
+
+
+def _xy(x: list[float]) -> XY:
+    return (float(x[POS[0]]), float(x[POS[1]]))
+
+
+def _percentiles(values: list[float]) -> dict[str, float | None]:
+    if not values:
+        return {"p50": None, "p95": None, "p99": None}
+    p = np.percentile(values, [50, 95, 99])
+    return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}
+
+
+def _thin(n: int, limit: int) -> range | list[int]:
+    """Indices of at most ``limit`` evenly spaced items of ``n``, always keeping the last."""
+    if n <= limit:
+        return range(n)
+    step = math.ceil(n / limit)
+    idx = list(range(0, n, step))
+    if idx[-1] != n - 1:
+        idx.append(n - 1)
+    return idx
+
+
+@dataclass
+class Track:
+    """One filter's estimates in one episode, keyed by step."""
+
+    role: Role
+    pos: dict[int, XY] = field(default_factory=dict)
+    used: dict[int, bool] = field(default_factory=dict)
+    latency_ms: dict[int, float] = field(default_factory=dict)
+    step_ms: dict[int, float] = field(default_factory=dict)
+    err: dict[int, float] = field(default_factory=dict)  #: position error where truth is known
+    err_sum: float = 0.0
+
+    def set_error(self, k: int, truth: XY) -> float:
+        x, y = self.pos[k]
+        e = math.hypot(x - truth[0], y - truth[1])
+        self.err[k] = e
+        self.err_sum += e
+        return e
+
+    @property
+    def rmse(self) -> float | None:
+        return self.err_sum / len(self.err) if self.err else None
+
+
+@dataclass
+class Episode:
+    id: str
+    run: int | None = None
+    K: int | None = None
+    steps_per_sec: float | None = None
+    started: float | None = None
+    ended: str | None = None  #: the end reason once EpisodeEnd arrived
+    sensors: dict[str, XY] = field(default_factory=dict)
+    truth: dict[int, XY] = field(default_factory=dict)
+    tracks: dict[str, Track] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ErrorUpdate:
+    """A newly known RMSE(k) of a filter, and its episode RMSE so far (for the metrics)."""
+
+    filter: str
+    k: int
+    error: float
+    rmse: float
+
+
+@dataclass
+class ServiceHealth:
+    operator: str
+    service: str
+    alive: bool = False
+    changed: float = 0.0  #: time.time() of the last liveliness change
+    stats: dict[str, Any] = field(default_factory=dict)
+    stats_at: float | None = None
+
+    @property
+    def name(self) -> str:
+        return f"{self.operator}/{self.service}"
+
+
+def _count_map(value: Any) -> dict[str, int]:
+    """A ``{str: non-negative int}`` mapping from untrusted JSON, at most MAX_STATS_ENTRIES."""
+    out: dict[str, int] = {}
+    if isinstance(value, dict):
+        for key, n in value.items():
+            if len(out) >= MAX_STATS_ENTRIES:
+                break
+            if isinstance(key, str) and type(n) is int and n >= 0:
+                out[key[:256]] = n
+    return out
+
+
+def clean_stats(raw: Any) -> dict[str, Any] | None:
+    """The parts of a service's statistics the dashboard uses, or None if it is not an object."""
+    if not isinstance(raw, dict):
+        return None
+    rejected = raw.get("rejected")
+    if not isinstance(rejected, dict):
+        rejected = {}
+    dropped = raw.get("dropped")
+    return {
+        "counters": _count_map(raw.get("counters")),
+        "rejected_by_key": _count_map(rejected.get("by_key")),
+        "rejected_by_reason": _count_map(rejected.get("by_reason")),
+        "dropped": dropped if type(dropped) is int and dropped >= 0 else 0,
+    }
+
+
+class State:
+    """Thread-safe: the Zenoh loop writes, the web handlers read :meth:`snapshot`."""
+
+    def __init__(
+        self,
+        max_episodes: int = 4,
+        max_steps: int = 20_000,
+        max_filters: int = 8,
+        max_points: int = 2_000,
+        poll_ms: int = 250,
+    ) -> None:
+        self.max_episodes, self.max_steps = max_episodes, max_steps
+        self.max_filters, self.max_points, self.poll_ms = max_filters, max_points, poll_ms
+        self._lock = threading.Lock()
+        self._episodes: OrderedDict[str, Episode] = OrderedDict()
+        self._services: dict[str, ServiceHealth] = {}
+        self._received: dict[str, int] = {}
+        self.version = 0  #: bumped on every change; the page skips redraws when it is unchanged
+        self._cache: tuple[int, str | None, dict[str, Any]] | None = None
+
+    # ---- writes (Zenoh thread) ------------------------------------------------------------
+
+    def _episode(self, e: str) -> Episode:
+        """The episode, created if unknown (the dashboard may start mid-episode)."""
+        ep = self._episodes.get(e)
+        if ep is None:
+            ep = self._episodes[e] = Episode(e)
+            while len(self._episodes) > self.max_episodes:
+                self._episodes.popitem(last=False)
+        return ep
+
+    def on_received(self, pattern: str) -> None:
+        with self._lock:
+            if pattern in self._received or len(self._received) < MAX_STATS_ENTRIES:
+                self._received[pattern] = self._received.get(pattern, 0) + 1
+
+    def on_start(self, m: EpisodeStart) -> None:
+        with self._lock:
+            ep = self._episode(m.episode)
+            self._episodes.move_to_end(m.episode)  # a new episode becomes the one on show
+            ep.run, ep.K, ep.started = m.run, m.K, m.t_sensor
+            ep.steps_per_sec = m.steps_per_sec
+            cfg = m.config
+            ep.sensors = {"primary": _pair(cfg.get("primary_position"))}
+            for src in cfg.get("sources", [])[:16]:
+                if isinstance(src, dict) and isinstance(src.get("id"), str):
+                    ep.sensors[src["id"]] = _pair(src.get("position"))
+            self.version += 1
+
+    def on_end(self, m: EpisodeEnd) -> None:
+        with self._lock:
+            self._episode(m.episode).ended = m.reason
+            self.version += 1
+
+    def on_truth(self, m: Truth) -> tuple[Verdict, list[ErrorUpdate]]:
+        with self._lock:
+            ep = self._episode(m.episode)
+            if m.k in ep.truth:
+                return "duplicate", []
+            if len(ep.truth) >= self.max_steps:
+                return "capacity", []
+            ep.truth[m.k] = t = _xy(m.x)
+            updates = []
+            for name, tr in ep.tracks.items():
+                if m.k in tr.pos:
+                    e = tr.set_error(m.k, t)
+                    updates.append(ErrorUpdate(name, m.k, e, tr.rmse or 0.0))
+            self.version += 1
+            return "new", updates
+
+    def on_estimate(
+        self, role: Role, m: EstimateMsg, t_recv: float
+    ) -> tuple[Verdict, ErrorUpdate | None]:
+        with self._lock:
+            ep = self._episode(m.episode)
+            tr = ep.tracks.get(m.filter)
+            if tr is None:
+                if len(ep.tracks) >= self.max_filters:
+                    return "capacity", None
+                tr = ep.tracks[m.filter] = Track(role)
+            if m.k in tr.pos:
+                return "duplicate", None
+            if len(tr.pos) >= self.max_steps:
+                return "capacity", None
+            tr.pos[m.k] = _xy(m.x)
+            tr.used[m.k] = m.transfer_used
+            tr.latency_ms[m.k] = (t_recv - m.t_sensor) * 1e3
+            tr.step_ms[m.k] = m.step_ms
+            update = None
+            if (t := ep.truth.get(m.k)) is not None:
+                update = ErrorUpdate(m.filter, m.k, tr.set_error(m.k, t), tr.rmse or 0.0)
+            self.version += 1
+            return "new", update
+
+    def on_liveliness(self, operator: str, service: str, alive: bool) -> None:
+        with self._lock:
+            h = self._health(operator, service)
+            if h is not None and h.alive != alive:
+                h.alive, h.changed = alive, time.time()
+                self.version += 1
+
+    def on_stats(self, operator: str, service: str, raw: Any) -> bool:
+        """Record a service's statistics; False if they are not a JSON object."""
+        stats = clean_stats(raw)
+        if stats is None:
+            return False
+        with self._lock:
+            h = self._health(operator, service)
+            if h is not None:
+                if h.stats != stats:
+                    self.version += 1
+                h.stats, h.stats_at = stats, time.time()
+        return True
+
+    def _health(self, operator: str, service: str) -> ServiceHealth | None:
+        name = f"{operator}/{service}"
+        h = self._services.get(name)
+        if h is None and len(self._services) < MAX_SERVICES:
+            h = self._services[name] = ServiceHealth(operator, service)
+        return h
+
+    # ---- reads (web threads, metrics) -----------------------------------------------------
+
+    def services(self) -> list[ServiceHealth]:
+        """Copies, for the metrics collector."""
+        with self._lock:
+            return [
+                ServiceHealth(h.operator, h.service, h.alive, h.changed, dict(h.stats), h.stats_at)
+                for h in self._services.values()
+            ]
+
+    def snapshot(self, episode: str | None = None) -> dict[str, Any]:
+        """Everything the page draws, as plain JSON-ready data (cached per version)."""
+        with self._lock:
+            if self._cache is not None and self._cache[:2] == (self.version, episode):
+                return self._cache[2]
+            snap = self._snapshot(episode)
+            self._cache = (self.version, episode, snap)
+            return snap
+
+    def _snapshot(self, episode: str | None) -> dict[str, Any]:
+        now = time.time()
+        ep = self._episodes.get(episode) if episode else None
+        if ep is None and self._episodes:
+            ep = next(reversed(self._episodes.values()))
+        services = [
+            self._service_json(h, now)
+            for h in sorted(self._services.values(), key=lambda h: h.name)
+        ]
+        by_reason: dict[str, int] = {}
+        for h in self._services.values():
+            for reason, n in h.stats.get("rejected_by_reason", {}).items():
+                by_reason[reason] = by_reason.get(reason, 0) + n
+        return {
+            "version": self.version,
+            "server_time": now,
+            "poll_ms": self.poll_ms,
+            "episodes": [
+                {"id": e.id, "run": e.run, "K": e.K, "ended": e.ended}
+                for e in self._episodes.values()
+            ],
+            "episode": None if ep is None else self._episode_json(ep),
+            "services": services,
+            "rejected": {
+                "total": sum(s["rejected_total"] for s in services),
+                "by_service": {s["name"]: s["rejected_total"] for s in services},
+                "by_reason": by_reason,
+            },
+            "received": dict(self._received),
+        }
+
+    def _episode_json(self, ep: Episode) -> dict[str, Any]:
+        truth = sorted(ep.truth.items())
+        filters = []
+        transfer: list[list[int]] = []
+        for name, tr in sorted(ep.tracks.items(), key=lambda kv: (_ROLE_ORDER[kv[1].role], kv[0])):
+            ks = sorted(tr.pos)
+            errs = sorted(tr.err.items())
+            used = sum(tr.used.values())
+            filters.append(
+                {
+                    "name": name,
+                    "role": tr.role,
+                    "steps": len(ks),
+                    "last_k": ks[-1] if ks else None,
+                    "points": [
+                        [k, *tr.pos[k]] for k in (ks[i] for i in _thin(len(ks), self.max_points))
+                    ],
+                    "error": [list(errs[i]) for i in _thin(len(errs), self.max_points)],
+                    "rmse": tr.rmse,
+                    "rmse_k": errs[-1][1] if errs else None,
+                    "latency_ms": _percentiles(list(tr.latency_ms.values())),
+                    "step_ms": _percentiles(list(tr.step_ms.values())),
+                    "transfer_used": used,
+                    "transfer_skipped": len(ks) - used,
+                }
+            )
+            if tr.role == "tl" and not transfer:
+                transfer = [[k, int(tr.used[k])] for k in ks]
+        last = max(
+            [k for k, _ in truth[-1:]] + [max(tr.pos, default=0) for tr in ep.tracks.values()] + [0]
+        )
+        return {
+            "id": ep.id,
+            "run": ep.run,
+            "K": ep.K,
+            "steps_per_sec": ep.steps_per_sec,
+            "started": ep.started,
+            "ended": ep.ended,
+            "last_k": last,
+            "sensors": [{"name": n, "x": p[0], "y": p[1]} for n, p in ep.sensors.items()],
+            "truth": [[truth[i][0], *truth[i][1]] for i in _thin(len(truth), self.max_points)],
+            "filters": filters,
+            "transfer": transfer,
+        }
+
+    @staticmethod
+    def _service_json(h: ServiceHealth, now: float) -> dict[str, Any]:
+        s = h.stats
+        return {
+            "name": h.name,
+            "operator": h.operator,
+            "service": h.service,
+            "alive": h.alive,
+            "since_s": now - h.changed if h.changed else None,
+            "stats_age_s": None if h.stats_at is None else now - h.stats_at,
+            "counters": s.get("counters", {}),
+            "rejected_total": sum(s.get("rejected_by_reason", {}).values()),
+            "rejected_by_reason": s.get("rejected_by_reason", {}),
+            "dropped": s.get("dropped", 0),
+        }
+
+
+_ROLE_ORDER: dict[str, int] = {"source": 0, "tl": 1, "isolated": 2}
+
+
+def _pair(v: Any) -> XY:
+    if (
+        isinstance(v, list | tuple)
+        and len(v) == 2
+        and all(isinstance(c, int | float) and math.isfinite(c) for c in v)
+    ):
+        return (float(v[0]), float(v[1]))
+    return (0.0, 0.0)
