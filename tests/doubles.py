@@ -1,11 +1,10 @@
-"""Linear-Gaussian stand-ins for the motion and measurement models, where a Kalman filter is exact."""
+"""Linear-Gaussian stand-ins for the models, where a Kalman filter is exact."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-
 from tltrack.models.motion import ConstantVelocity
 
 

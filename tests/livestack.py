@@ -25,8 +25,9 @@ def stack(tmp: Path) -> Iterator[demo.Stack]:
         assert all(c is not None for c in codes.values()), f"processes left running: {codes}"
 
 
-def start_all(s: demo.Stack, db: Path, *, primary_env: dict[str, str] | None = None,
-              sim: list[str]) -> None:
+def start_all(
+    s: demo.Stack, db: Path, *, primary_env: dict[str, str] | None = None, sim: list[str]
+) -> None:
     s.start_router()
     s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
     s.start_service("primary_tracker", env=primary_env)
@@ -36,8 +37,9 @@ def start_all(s: demo.Stack, db: Path, *, primary_env: dict[str, str] | None = N
 
 def sim_flags(steps: int, particles: int, pace: float = 0.0, **kw: Any) -> list[str]:
     o = {**SIM_DEFAULTS, **kw}
-    return demo.sim_flags(steps, particles, pace, False, o["preset"], o["truth"], o["seed"],
-                          o.get("episodes", 1))
+    return demo.sim_flags(
+        steps, particles, pace, False, o["preset"], o["truth"], o["seed"], o.get("episodes", 1)
+    )
 
 
 def estimates(db: Path) -> dict[str, dict[int, tuple[list[float], bool]]]:

@@ -5,7 +5,6 @@ would notice; only equality with the offline engine does. The shifted replay mus
 """
 
 import numpy as np
-
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import PRIMARY, simulate
@@ -23,11 +22,20 @@ def _replay(shift: int) -> np.ndarray:
     made: dict[int, Transfer] = {}
     out = []
     for k in range(1, CFG.K + 1):
-        z = {i: Measurement(episode="e", sender="t", k=k, t_sensor=0.0, sensor=i,
-                            z=run.z[i][k - 1]) for i in (PRIMARY, sid)}
+        z = {
+            i: Measurement(episode="e", sender="t", k=k, t_sensor=0.0, sensor=i, z=run.z[i][k - 1])
+            for i in (PRIMARY, sid)
+        }
         _, eta = src.step(z[sid])
-        made[k + 1 - shift] = Transfer(episode="e", sender=sid, k=k, t_sensor=0.0, k_apply=k + 1,
-                                       eta=eta.mean[:, 0], P_eta=eta.cov[0])
+        made[k + 1 - shift] = Transfer(
+            episode="e",
+            sender=sid,
+            k=k,
+            t_sensor=0.0,
+            k_apply=k + 1,
+            eta=eta.mean[:, 0],
+            P_eta=eta.cov[0],
+        )
         transfers = {sid: made[k]} if k in made and k > 1 else {}
         tl, _ = prim.step(z[PRIMARY], transfers)
         out.append(tl.mean[0])

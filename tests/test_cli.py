@@ -1,18 +1,39 @@
 import json
 
 import pytest
-from typer.testing import CliRunner
-
 from tltrack.cli import app
+from typer.testing import CliRunner
 
 runner = CliRunner()
 
 
 def test_experiment_writes_results_and_figures(tmp_path):
-    r = runner.invoke(app, ["experiment", "--scenario", "ct", "--preset", "arasaratnam-haykin",
-                            "--truth", "noise-free", "--filters", "pf,tl-pf,ukf", "--particles",
-                            "200", "--runs", "4", "--primary-intensity", "4", "--seed", "1",
-                            "--workers", "1", "--out", str(tmp_path)])
+    r = runner.invoke(
+        app,
+        [
+            "experiment",
+            "--scenario",
+            "ct",
+            "--preset",
+            "arasaratnam-haykin",
+            "--truth",
+            "noise-free",
+            "--filters",
+            "pf,tl-pf,ukf",
+            "--particles",
+            "200",
+            "--runs",
+            "4",
+            "--primary-intensity",
+            "4",
+            "--seed",
+            "1",
+            "--workers",
+            "1",
+            "--out",
+            str(tmp_path),
+        ],
+    )
     assert r.exit_code == 0, r.output
     doc = json.loads((tmp_path / "results.json").read_text())
     assert doc["config"]["primary_intensity"] == 4 and doc["config"]["particles"] == 200
@@ -24,12 +45,15 @@ def test_experiment_writes_results_and_figures(tmp_path):
     assert (tmp_path / "rmse.png").exists()
 
 
-@pytest.mark.parametrize(("args", "needle"), [
-    (["--particles", "-1"], "particles"),
-    (["--truth", "sometimes"], "truth"),
-    (["--filters", "pf,kalman"], "kalman"),
-    (["--source-intensity", "0"], "intensity"),
-])
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--particles", "-1"], "particles"),
+        (["--truth", "sometimes"], "truth"),
+        (["--filters", "pf,kalman"], "kalman"),
+        (["--source-intensity", "0"], "intensity"),
+    ],
+)
 def test_bad_options_are_refused_naming_the_field(tmp_path, args, needle):
     r = runner.invoke(app, ["experiment", "--runs", "1", "--out", str(tmp_path), *args])
     assert r.exit_code == 2

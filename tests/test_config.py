@@ -1,7 +1,6 @@
 import json
 
 import pytest
-
 from tltrack.config import ConfigError, load_config, make_config
 
 
@@ -43,5 +42,5 @@ def test_loads_toml_and_json_with_overrides(tmp_path):
     bad.write_text("particles = [")
     with pytest.raises(ConfigError, match=r"bad\.toml"):
         load_config(bad)
-    with pytest.raises(ConfigError, match="sources.0.intensity"):
+    with pytest.raises(ConfigError, match=r"sources\.0\.intensity"):
         make_config().with_source_intensity(0.0)

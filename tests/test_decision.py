@@ -1,5 +1,4 @@
 import numpy as np
-
 from tltrack.filters.decision import TransferPolicy, disagreement, nis
 from tltrack.models import Observation, RangeBearing
 
@@ -14,12 +13,17 @@ def _pair(rng, bias=0.0):
     z = h + np.linalg.cholesky(R_p) @ rng.standard_normal((2, B))
     P_eta = R_s + np.diag([30.0, 2e-6])
     eta = h + np.linalg.cholesky(P_eta) @ rng.standard_normal((2, B)) + np.array([[0], [bias]])
-    return (Observation.broadcast(S, z, R_p), Observation(S, eta, np.broadcast_to(P_eta, (B, 2, 2))))
+    return (
+        Observation.broadcast(S, z, R_p),
+        Observation(S, eta, np.broadcast_to(P_eta, (B, 2, 2))),
+    )
 
 
 def test_an_honest_transfers_disagreement_is_chi_square_2():
     z, t = _pair(np.random.default_rng(0))
-    assert abs(nis(*disagreement(t, z)).mean() - 2.0) < 0.15  # E[chi2(2)] = 2; linearisation error is tiny here
+    assert (
+        abs(nis(*disagreement(t, z)).mean() - 2.0) < 0.15
+    )  # E[chi2(2)] = 2; linearisation error is tiny here
 
 
 def test_honest_transfers_pass_and_a_biased_source_is_shut_out():

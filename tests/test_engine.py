@@ -2,7 +2,6 @@ import json
 
 import numpy as np
 import pytest
-
 from tltrack.config import make_config
 from tltrack.engine import results
 from tltrack.engine.montecarlo import run_experiment, trace_run
@@ -12,8 +11,9 @@ FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
 
 
 def _cfg(**kw):
-    return make_config({"preset": "arasaratnam-haykin", "K": 15, "particles": 200, "runs": 7,
-                        "seed": 4, **kw})
+    return make_config(
+        {"preset": "arasaratnam-haykin", "K": 15, "particles": 200, "runs": 7, "seed": 4, **kw}
+    )
 
 
 def test_same_seed_same_result_whatever_the_batch_size_or_worker_count():
@@ -24,16 +24,24 @@ def test_same_seed_same_result_whatever_the_batch_size_or_worker_count():
         other = run_experiment(cfg, FILTERS, batch_size=bs, workers=workers, time_steps=False)
         for name in base:
             np.testing.assert_allclose(base[name].run_mse, other[name].run_mse, rtol=1e-9)
-            np.testing.assert_allclose(base[name].rmse_per_step, other[name].rmse_per_step,
-                                       rtol=1e-9)
+            np.testing.assert_allclose(
+                base[name].rmse_per_step, other[name].rmse_per_step, rtol=1e-9
+            )
 
 
 def test_overall_rmse_is_the_papers_mean_of_per_step_rmse():
     cfg = _cfg()
     res = run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"]
     per_run = {r: trace_run(cfg, ["pf"], r)["pf"] for r in range(cfg.runs)}
-    sq = np.array([[np.sum((per_run[r][k, [0, 2]] - truth(cfg, r)[k + 1, [0, 2]]) ** 2)
-                    for k in range(cfg.K)] for r in range(cfg.runs)])
+    sq = np.array(
+        [
+            [
+                np.sum((per_run[r][k, [0, 2]] - truth(cfg, r)[k + 1, [0, 2]]) ** 2)
+                for k in range(cfg.K)
+            ]
+            for r in range(cfg.runs)
+        ]
+    )
     np.testing.assert_allclose(res.rmse_per_step, np.sqrt(sq.mean(axis=0)), rtol=1e-12)
     assert res.rmse_overall == pytest.approx(np.mean(np.sqrt(sq.mean(axis=0))))
 
@@ -49,8 +57,9 @@ def test_truth_modes(mode):
 
 
 def test_transfer_helps_and_fusion_helps_more():
-    cfg = make_config(preset="arasaratnam-haykin", truth="noise-free", particles=1000, runs=16,
-                      K=40, seed=2)
+    cfg = make_config(
+        preset="arasaratnam-haykin", truth="noise-free", particles=1000, runs=16, K=40, seed=2
+    )
     res = run_experiment(cfg, ["pf", "tl-pf", "fusion-pf"], time_steps=False)
     assert res["tl-pf"].rmse_overall < res["pf"].rmse_overall
     assert res["fusion-pf"].rmse_overall < res["pf"].rmse_overall
@@ -62,15 +71,18 @@ def test_results_document_has_the_contract_fields(tmp_path):
     path = results.write(doc, tmp_path)
     back = json.loads(path.read_text())
     assert back["schema_version"] == results.SCHEMA_VERSION
-    assert {"package_version", "git_commit", "numpy_version", "machine"} <= back["provenance"].keys()
+    assert {"package_version", "git_commit", "numpy_version", "machine"} <= back[
+        "provenance"
+    ].keys()
     assert set(back["filters"]) == {"pf", "tl-pf", "source-pf"}
     for r in back["filters"].values():
         assert len(r["rmse_per_step"]) == cfg.K
         assert {"rmse_overall", "ms_per_step", "lost_fraction", "nees"} <= r.keys()
         assert r["ms_per_step"] > 0
     assert len(back["pcrlb"]["primary"]) == len(back["pcrlb"]["with_source"]) == cfg.K
-    assert all(w <= p for w, p in zip(back["pcrlb"]["with_source"], back["pcrlb"]["primary"],
-                                      strict=True))
+    assert all(
+        w <= p for w, p in zip(back["pcrlb"]["with_source"], back["pcrlb"]["primary"], strict=True)
+    )
 
 
 def test_lost_fraction_counts_runs_far_off_at_the_end():

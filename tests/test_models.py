@@ -1,6 +1,5 @@
 import numpy as np
 import pytest
-
 from tltrack.config import make_config
 from tltrack.models import RangeBearing, motion_model, wrap_angle
 

@@ -36,8 +36,11 @@ def test_pf_mean_approaches_the_kalman_mean_as_n_grows():
     errors = {}
     for n in (300, 30_000):
         B = 12
-        pf = Primary(ParticleFilter(model, np.repeat(X0[:, None], B, 1), P0, n,
-                                    streams(1, range(B), f"pf{n}")))
+        pf = Primary(
+            ParticleFilter(
+                model, np.repeat(X0[:, None], B, 1), P0, n, streams(1, range(B), f"pf{n}")
+            )
+        )
         for z, _ in zip(zs, kf, strict=True):
             est = pf.step(Observation.broadcast(sensor, np.repeat(z[:, None], B, 1), R))
         m_kf = kf[-1][0]
@@ -74,8 +77,12 @@ def test_mask_leaves_unmasked_runs_untouched():
     a = ParticleFilter(model, x0, P0, 1000, streams(2, range(2), "m"))
     b = ParticleFilter(model, x0, P0, 1000, streams(2, range(2), "m"))
     z = Observation.broadcast(sensor, np.array([110.0, 111.0]), R)
-    extra = Observation(sensor, np.array([[150.0, 150.0], [150.0, 150.0]]),
-                        np.broadcast_to(R, (2, 2, 2)), mask=np.array([True, False]))
+    extra = Observation(
+        sensor,
+        np.array([[150.0, 150.0], [150.0, 150.0]]),
+        np.broadcast_to(R, (2, 2, 2)),
+        mask=np.array([True, False]),
+    )
     for f, obs in ((a, [z, extra]), (b, [z])):
         f.predict()
         f.update(obs)

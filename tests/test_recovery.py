@@ -1,5 +1,4 @@
 import numpy as np
-
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import run_experiment
 from tltrack.engine.streams import streams

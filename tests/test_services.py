@@ -7,7 +7,6 @@ import msgpack
 import numpy as np
 import pytest
 from livestack import estimates, logs, sim_flags, stack, start_all, wait_until
-
 from tltrack import demo, keys
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
@@ -19,13 +18,15 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path):
     db = tmp_path / "scorer.sqlite"
     K, N = 30, 500
     with stack(tmp_path) as s:
-        start_all(s, db, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"},
-                  sim=sim_flags(K, N, pace=0))
+        start_all(
+            s, db, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"}, sim=sim_flags(K, N, pace=0)
+        )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = demo.wait_for_scored(s.endpoint, 1, 60)
         assert summary is not None, logs(s)
-    cfg = make_config(preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N,
-                      recovery=True)  # the trackers' default, as the engine's is off
+    cfg = make_config(
+        preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True
+    )  # the trackers' default, as the engine's is off
     offline = trace_run(cfg, ["tl-pf", "pf", "source-pf"], run=0)
     live = estimates(db)
     for name in ("tl-pf", "pf", "source-pf"):
@@ -72,11 +73,31 @@ def test_services_start_in_any_order_router_last(tmp_path):
 GARBAGE = [
     b"\x00\x01garbage",
     msgpack.packb({"schema_version": 1, "type": "measurement"})[:-3],
-    msgpack.packb({"schema_version": 99, "type": "measurement", "episode": "ep-r0", "sender": "x",
-                   "k": 1, "t_sensor": 0.0, "sensor": "primary", "z": [1.0, 0.1]}),
-    msgpack.packb({"schema_version": 1, "type": "transfer", "episode": "ep-r0", "sender": "s1",
-                   "k": 1, "t_sensor": 0.0, "k_apply": 2, "eta": [1.0, float("nan")],
-                   "P_eta": [[1.0, 0.0], [0.0, 1.0]]}),
+    msgpack.packb(
+        {
+            "schema_version": 99,
+            "type": "measurement",
+            "episode": "ep-r0",
+            "sender": "x",
+            "k": 1,
+            "t_sensor": 0.0,
+            "sensor": "primary",
+            "z": [1.0, 0.1],
+        }
+    ),
+    msgpack.packb(
+        {
+            "schema_version": 1,
+            "type": "transfer",
+            "episode": "ep-r0",
+            "sender": "s1",
+            "k": 1,
+            "t_sensor": 0.0,
+            "k_apply": 2,
+            "eta": [1.0, float("nan")],
+            "P_eta": [[1.0, 0.0], [0.0, 1.0]],
+        }
+    ),
 ]
 
 
@@ -87,16 +108,24 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
         s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         s.start_service("primary_tracker")
         s.start_service("source_tracker")
-        subscribed = [keys.episode("ep-r0"), keys.primary_meas("ep-r0"),
-                      keys.source_meas("s1", "ep-r0"), keys.transfer("s1", "ep-r0"),
-                      keys.truth("ep-r0"), keys.primary_estimate("tl", "ep-r0"),
-                      keys.source_estimate("s1", "ep-r0")]
+        subscribed = [
+            keys.episode("ep-r0"),
+            keys.primary_meas("ep-r0"),
+            keys.source_meas("s1", "ep-r0"),
+            keys.transfer("s1", "ep-r0"),
+            keys.truth("ep-r0"),
+            keys.primary_estimate("tl", "ep-r0"),
+            keys.source_estimate("s1", "ep-r0"),
+        ]
         with demo.client(s.endpoint) as session:
             from tltrack.transport import LivelinessWatcher
 
             with LivelinessWatcher(session, keys.ALIVE) as w:
-                for svc in ("primary:primary_tracker", "source/s1:source_tracker",
-                            "referee:scorer"):
+                for svc in (
+                    "primary:primary_tracker",
+                    "source/s1:source_tracker",
+                    "referee:scorer",
+                ):
                     assert w.wait_until(keys.alive(*svc.split(":")), True, 60), logs(s)
             for key in subscribed:
                 for payload in GARBAGE:
@@ -104,8 +133,13 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
             time.sleep(1.0)
         s.start_service("sensor_sim", *sim_flags(15, 300, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert wait_until(lambda: (demo.fetch_summary(s.endpoint) or {}).get("messages", {})
-                          .get("rejected_total", 0) >= 3 * len(GARBAGE), 30)
+        assert wait_until(
+            lambda: (
+                (demo.fetch_summary(s.endpoint) or {}).get("messages", {}).get("rejected_total", 0)
+                >= 3 * len(GARBAGE)
+            ),
+            30,
+        )
         summary = demo.wait_for_scored(s.endpoint, 1, 60)
         assert summary is not None
         for svc in ("primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"):
@@ -116,15 +150,29 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
             assert s.procs[name].poll() is None, f"{name} died"
 
 
-@pytest.mark.skipif(shutil.which("zenohd") is None,
-                    reason="no zenohd on PATH (make zenohd builds it with cargo, ~7.5 min)")
+@pytest.mark.skipif(
+    shutil.which("zenohd") is None,
+    reason="no zenohd on PATH (make zenohd builds it with cargo, ~7.5 min)",
+)
 def test_services_run_against_a_stock_zenohd(tmp_path):
     db = tmp_path / "scorer.sqlite"
     with stack(tmp_path) as s:
-        s.start("router", ["-c", "import os, sys; os.execvp('zenohd', sys.argv[1:])", "zenohd",
-                           "--no-multicast-scouting", "-l", s.endpoint])
-        for name, env in (("scorer", {"TLTRACK_SCORER_DB": str(db)}), ("primary_tracker", None),
-                          ("source_tracker", None)):
+        s.start(
+            "router",
+            [
+                "-c",
+                "import os, sys; os.execvp('zenohd', sys.argv[1:])",
+                "zenohd",
+                "--no-multicast-scouting",
+                "-l",
+                s.endpoint,
+            ],
+        )
+        for name, env in (
+            ("scorer", {"TLTRACK_SCORER_DB": str(db)}),
+            ("primary_tracker", None),
+            ("source_tracker", None),
+        ):
             s.start_service(name, env=env)
         s.start_service("sensor_sim", *sim_flags(20, 300, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)

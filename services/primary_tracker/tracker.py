@@ -93,10 +93,16 @@ class PrimaryTracker:
             self.alive.discard(sid)
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode:
-        log.info("episode %s (run %d): tl-%s and %s", start.episode, start.run, self.s.filter,
-                 self.s.filter)
-        return Episode(start, PrimaryEpisode(cfg, start.run, self.s.filter),
-                       [s.id for s in cfg.sources])
+        log.info(
+            "episode %s (run %d): tl-%s and %s",
+            start.episode,
+            start.run,
+            self.s.filter,
+            self.s.filter,
+        )
+        return Episode(
+            start, PrimaryEpisode(cfg, start.run, self.s.filter), [s.id for s in cfg.sources]
+        )
 
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
@@ -139,8 +145,9 @@ class PrimaryTracker:
                 if ep.ready_since is None:
                     ep.ready_since = now
                 have = ep.transfers.get(z.k, {}) if z.k > 1 else {}
-                waiting = [sid for sid in ep.sources
-                           if sid not in have and self._worth_waiting(sid)]
+                waiting = [
+                    sid for sid in ep.sources if sid not in have and self._worth_waiting(sid)
+                ]
                 if waiting and z.k > 1 and not self.s.lockstep:
                     left = ep.ready_since + self.s.deadline_ms / 1e3 - now
                     if left > 0:
@@ -159,8 +166,15 @@ class PrimaryTracker:
         """A source whose token went away is not waited for; an unseen one is (it may be late)."""
         return sid in self.alive or sid not in self.seen
 
-    def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float,
-              transfers: dict[str, Transfer]) -> None:
+    def _step(
+        self,
+        e: str,
+        ep: Episode,
+        k: int,
+        z: Measurement | None,
+        t_sensor: float,
+        transfers: dict[str, Transfer],
+    ) -> None:
         t0 = time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
@@ -170,12 +184,32 @@ class PrimaryTracker:
         self.svc.count("steps" if z is not None else "steps_without_measurement")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
 
-    def _publish(self, e: str, role: str, name: str, k: int, t_sensor: float, est: Estimate,
-                 used: bool, step_ms: float) -> None:
-        self.svc.publish(keys.primary_estimate(role, e), EstimateMsg(
-            episode=e, sender=keys.PRIMARY, k=k, t_sensor=t_sensor, filter=name,
-            x=est.mean[0], P=est.cov[0], transfer_used=used, t_sent=time.time(), step_ms=step_ms,
-        ))
+    def _publish(
+        self,
+        e: str,
+        role: str,
+        name: str,
+        k: int,
+        t_sensor: float,
+        est: Estimate,
+        used: bool,
+        step_ms: float,
+    ) -> None:
+        self.svc.publish(
+            keys.primary_estimate(role, e),
+            EstimateMsg(
+                episode=e,
+                sender=keys.PRIMARY,
+                k=k,
+                t_sensor=t_sensor,
+                filter=name,
+                x=est.mean[0],
+                P=est.cov[0],
+                transfer_used=used,
+                t_sent=time.time(),
+                step_ms=step_ms,
+            ),
+        )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -184,8 +218,9 @@ def main(argv: list[str] | None = None) -> None:
     warm_up(settings.filter)
     with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)
-        liveliness = svc.subscribe(keys.alive(keys.source_operator(keys.ANY), SOURCE_TRACKER),
-                                   liveliness=True)
+        liveliness = svc.subscribe(
+            keys.alive(keys.source_operator(keys.ANY), SOURCE_TRACKER), liveliness=True
+        )
         svc.announce()
         tracker = PrimaryTracker(settings, svc)
         wait: float | None = None

@@ -48,8 +48,9 @@ class Scorer:
         self.ended: dict[str, float] = {}  # episode -> monotonic time of its end
         self.last_seen: dict[str, float] = {}
         self.counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
-        self.scored: set[str] = {e for (e,) in store.rows(
-            "SELECT episode FROM episodes WHERE ended IS NOT NULL")}
+        self.scored: set[str] = {
+            e for (e,) in store.rows("SELECT episode FROM episodes WHERE ended IS NOT NULL")
+        }
         self._summary = b"{}"
         self._lock = threading.Lock()
         self.refresh()
@@ -110,8 +111,11 @@ class Scorer:
         now = time.monotonic()
         for e, t_end in list(self.ended.items()):
             K, counts = self.K.get(e), self.counts.get(e, {})
-            complete = (K is not None and len(counts) >= self.expected.get(e, 3)
-                        and all(n >= K for n in counts.values()))
+            complete = (
+                K is not None
+                and len(counts) >= self.expected.get(e, 3)
+                and all(n >= K for n in counts.values())
+            )
             quiet = now - max(t_end, self.last_seen.get(e, t_end)) > self.s.grace_s
             if complete or quiet:
                 del self.ended[e]
@@ -129,8 +133,13 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
             scorer = Scorer(settings, svc, store)
-            inbox = svc.subscribe(keys.EPISODES, keys.TRUTHS, keys.SOURCE_ESTIMATES,
-                                  keys.PRIMARY_ESTIMATES, f"{keys.ROOT}/**/stats/*")
+            inbox = svc.subscribe(
+                keys.EPISODES,
+                keys.TRUTHS,
+                keys.SOURCE_ESTIMATES,
+                keys.PRIMARY_ESTIMATES,
+                f"{keys.ROOT}/**/stats/*",
+            )
             with Queryable(svc.session, keys.SCORER_SUMMARY, scorer.answer):
                 svc.announce()
                 last_refresh = time.monotonic()

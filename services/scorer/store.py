@@ -49,25 +49,41 @@ class Store:
         )
 
     def episode_end(self, m: EpisodeEnd) -> None:
-        self.db.execute("UPDATE episodes SET ended = ?, end_reason = ? WHERE episode = ?",
-                        (m.t_sensor, m.reason, m.episode))
+        self.db.execute(
+            "UPDATE episodes SET ended = ?, end_reason = ? WHERE episode = ?",
+            (m.t_sensor, m.reason, m.episode),
+        )
 
     def truth(self, m: Truth) -> bool:
-        cur = self.db.execute("INSERT OR IGNORE INTO truth VALUES (?,?,?,?)",
-                              (m.episode, m.k, json.dumps(m.x), m.t_sensor))
+        cur = self.db.execute(
+            "INSERT OR IGNORE INTO truth VALUES (?,?,?,?)",
+            (m.episode, m.k, json.dumps(m.x), m.t_sensor),
+        )
         return cur.rowcount == 1
 
     def estimate(self, m: EstimateMsg, t_recv: float) -> bool:
         cur = self.db.execute(
             "INSERT OR IGNORE INTO estimates VALUES (?,?,?,?,?,?,?,?,?,?)",
-            (m.episode, m.filter, m.k, json.dumps(m.x), json.dumps(m.P), int(m.transfer_used),
-             m.t_sensor, m.t_sent, t_recv, m.step_ms),
+            (
+                m.episode,
+                m.filter,
+                m.k,
+                json.dumps(m.x),
+                json.dumps(m.P),
+                int(m.transfer_used),
+                m.t_sensor,
+                m.t_sent,
+                t_recv,
+                m.step_ms,
+            ),
         )
         return cur.rowcount == 1
 
     def service_stats(self, operator: str, service: str, t: float, stats: dict[str, Any]) -> None:
-        self.db.execute("INSERT OR REPLACE INTO service_stats VALUES (?,?,?,?)",
-                        (operator, service, t, json.dumps(stats)))
+        self.db.execute(
+            "INSERT OR REPLACE INTO service_stats VALUES (?,?,?,?)",
+            (operator, service, t, json.dumps(stats)),
+        )
 
     def rows(self, sql: str, *args: Any) -> list[tuple[Any, ...]]:
         return self.db.execute(sql, args).fetchall()

@@ -31,8 +31,10 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
         eps = [e for e in eps if e[0] in episodes]
     names = [e[0] for e in eps]
     K_of = {e[0]: e[2] for e in eps}
-    truth = {(ep, k): np.array(json.loads(x))
-             for ep, k, x in store.rows("SELECT episode, k, x FROM truth")}
+    truth = {
+        (ep, k): np.array(json.loads(x))
+        for ep, k, x in store.rows("SELECT episode, k, x FROM truth")
+    }
     sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     latency: dict[str, list[float]] = defaultdict(list)
     used: dict[str, int] = defaultdict(int)
@@ -69,8 +71,10 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
         rejected[f"{operator}/{service}"] = s.get("rejected", {}).get("by_reason", {})
         dropped += int(s.get("dropped", 0))
     return {
-        "episodes": [{"episode": e, "run": r, "K": K, "complete": reason == "complete"}
-                     for e, r, K, _ended, reason in eps],
+        "episodes": [
+            {"episode": e, "run": r, "K": K, "complete": reason == "complete"}
+            for e, r, K, _ended, reason in eps
+        ],
         "filters": filters,
         "latency_ms": _percentiles(everything),
         "messages": {

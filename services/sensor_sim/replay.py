@@ -40,7 +40,9 @@ def load(path: Path, sensors: list[str]) -> dict[str, NDArray[np.float64]]:
             rows: dict[tuple[int, str], tuple[float, float]] = {}
             for line, row in enumerate(reader, start=2):
                 rows[_parse(path, line, row, sensors)] = (
-                    float(row["range_m"]), float(row["bearing_rad"]))
+                    float(row["range_m"]),
+                    float(row["bearing_rad"]),
+                )
     except OSError as err:
         raise ReplayError(f"cannot read {path}: {err.strerror}") from None
     K = max((k for k, _ in rows), default=0)

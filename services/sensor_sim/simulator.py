@@ -51,8 +51,11 @@ class Settings(BaseSettings):
     realtime: bool = Field(False, description="pace at one step per Ts")
     replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
     wait_for: list[str] = Field(
-        default_factory=lambda: ["source/s1:source_tracker", "primary:primary_tracker",
-                                 "referee:scorer"],
+        default_factory=lambda: [
+            "source/s1:source_tracker",
+            "primary:primary_tracker",
+            "referee:scorer",
+        ],
         description="operator:service tokens to await before starting",
     )
     wait_timeout_s: float = Field(60.0, gt=0)
@@ -61,8 +64,12 @@ class Settings(BaseSettings):
 
     def experiment_config(self) -> Config:
         over: dict[str, Any] = {
-            "scenario": self.scenario, "preset": self.preset, "truth": self.truth,
-            "seed": self.seed, "K": self.steps, "particles": self.particles,
+            "scenario": self.scenario,
+            "preset": self.preset,
+            "truth": self.truth,
+            "seed": self.seed,
+            "K": self.steps,
+            "particles": self.particles,
             "primary_intensity": self.primary_intensity,
         }
         return load_config(self.config, **over) if self.config else make_config(**over)
@@ -72,8 +79,9 @@ class Simulator:
     def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
         self.s, self.cfg, self.svc = settings, cfg, svc
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)]
-        self.recorded = (replay.load(settings.replay_csv, self.sensors)
-                         if settings.replay_csv else None)
+        self.recorded = (
+            replay.load(settings.replay_csv, self.sensors) if settings.replay_csv else None
+        )
         if self.recorded is not None:
             self.cfg = cfg.with_(K=len(self.recorded[PRIMARY]))
 
@@ -107,11 +115,19 @@ class Simulator:
         else:
             z, truth = self.recorded, None
         now = time.time()
-        self.svc.publish(keys.episode(e), EpisodeStart(
-            episode=e, sender=NAME, k=0, t_sensor=now, run=run,
-            config=self.cfg.model_dump(mode="json"), K=self.cfg.K,
-            steps_per_sec=1.0 / self.period if self.period else 0.0,
-        ))
+        self.svc.publish(
+            keys.episode(e),
+            EpisodeStart(
+                episode=e,
+                sender=NAME,
+                k=0,
+                t_sensor=now,
+                run=run,
+                config=self.cfg.model_dump(mode="json"),
+                K=self.cfg.K,
+                steps_per_sec=1.0 / self.period if self.period else 0.0,
+            ),
+        )
         log.info("episode %s: run %d, %d steps", e, run, self.cfg.K)
         t_next = time.monotonic()
         for k in range(1, self.cfg.K + 1):
@@ -120,21 +136,33 @@ class Simulator:
             t_next += self.period
             t = time.time()
             if truth is not None:
-                self.svc.publish(keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t,
-                                                      x=truth[k]))
+                self.svc.publish(
+                    keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t, x=truth[k])
+                )
             for sid in self.sensors:
                 key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
-                self.svc.publish(key, Measurement(episode=e, sender=NAME, k=k, t_sensor=t,
-                                                  sensor=sid, z=z[sid][k - 1]))
+                self.svc.publish(
+                    key,
+                    Measurement(
+                        episode=e, sender=NAME, k=k, t_sensor=t, sensor=sid, z=z[sid][k - 1]
+                    ),
+                )
             self.svc.count("steps")
             self.svc.publish_stats()
             if (pause := t_next - time.monotonic()) > 0:
                 self.svc.stop.wait(pause)
         done = not self.svc.stop.is_set()
-        self.svc.publish(keys.episode(e), EpisodeEnd(
-            episode=e, sender=NAME, k=k, t_sensor=time.time(),
-            reason="complete" if done else "aborted", steps_sent=k if done else k - 1,
-        ))
+        self.svc.publish(
+            keys.episode(e),
+            EpisodeEnd(
+                episode=e,
+                sender=NAME,
+                k=k,
+                t_sensor=time.time(),
+                reason="complete" if done else "aborted",
+                steps_sent=k if done else k - 1,
+            ),
+        )
 
 
 def main(argv: list[str] | None = None) -> None:

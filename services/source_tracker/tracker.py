@@ -94,14 +94,33 @@ class SourceTracker:
         step_ms = (time.perf_counter() - t0) * 1e3
         sid = self.s.source_id
         if k < ep.start.K:
-            self.svc.publish(keys.transfer(sid, e), Transfer(
-                episode=e, sender=sid, k=k, t_sensor=t_sensor, k_apply=k + 1,
-                eta=eta.mean[:, 0], P_eta=eta.cov[0],
-            ))
-        self.svc.publish(keys.source_estimate(sid, e), EstimateMsg(
-            episode=e, sender=sid, k=k, t_sensor=t_sensor, filter=ep.tracker.name,
-            x=est.mean[0], P=est.cov[0], transfer_used=False, t_sent=time.time(), step_ms=step_ms,
-        ))
+            self.svc.publish(
+                keys.transfer(sid, e),
+                Transfer(
+                    episode=e,
+                    sender=sid,
+                    k=k,
+                    t_sensor=t_sensor,
+                    k_apply=k + 1,
+                    eta=eta.mean[:, 0],
+                    P_eta=eta.cov[0],
+                ),
+            )
+        self.svc.publish(
+            keys.source_estimate(sid, e),
+            EstimateMsg(
+                episode=e,
+                sender=sid,
+                k=k,
+                t_sensor=t_sensor,
+                filter=ep.tracker.name,
+                x=est.mean[0],
+                P=est.cov[0],
+                transfer_used=False,
+                t_sent=time.time(),
+                step_ms=step_ms,
+            ),
+        )
         self.svc.count("steps" if z is not None else "steps_predicted_only")
 
 

@@ -1,4 +1,6 @@
-"""tltrack: Bayesian transfer learning between tracking operators (the TL-PF of Alotaibi, Mark & Fasihi).
+"""tltrack: Bayesian transfer learning between tracking operators.
+
+The TL-PF of Alotaibi, Mark & Fasihi, as a library, a Monte-Carlo engine and live services.
 
 Layers, bottom to top (an import never runs back up):
 

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TextColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from tltrack.config import Config, ConfigError, load_config, make_config
 
@@ -24,8 +24,13 @@ console = Console(stderr=True)
 def progress_bar(total: int, what: str) -> Progress:
     """A progress bar on stderr, for long Monte-Carlo work."""
     p = Progress(
-        TextColumn(f"[bold]{what}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        console=console, transient=False, disable=not console.is_terminal and total < 2,
+        TextColumn(f"[bold]{what}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+        disable=not console.is_terminal and total < 2,
     )
     return p
 
@@ -75,20 +80,29 @@ def experiment(
     particles: Annotated[int | None, typer.Option(help="particles per PF")] = None,
     runs: Annotated[int | None, typer.Option(help="Monte-Carlo runs")] = None,
     source_intensity: Annotated[float | None, typer.Option(help="I_w of the source")] = None,
-    sources: Annotated[str | None, typer.Option(
-        help="several sources at the origin, by intensity, e.g. 1,2,8")] = None,
-    source_fault: Annotated[str | None, typer.Option(
-        help="fault of the (first) source: none, bias, diverged or stale")] = None,
-    transfer_budget: Annotated[float | None, typer.Option(
-        help="robust-tl-*: at most this share of steps with a transfer")] = None,
+    sources: Annotated[
+        str | None, typer.Option(help="several sources at the origin, by intensity, e.g. 1,2,8")
+    ] = None,
+    source_fault: Annotated[
+        str | None, typer.Option(help="fault of the (first) source: none, bias, diverged or stale")
+    ] = None,
+    transfer_budget: Annotated[
+        float | None, typer.Option(help="robust-tl-*: at most this share of steps with a transfer")
+    ] = None,
     primary_intensity: Annotated[float | None, typer.Option(help="I_w of the primary")] = None,
     truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free")] = None,
     seed: Annotated[int | None, typer.Option(help="master seed of every random stream")] = None,
     truth_seed: Annotated[int | None, typer.Option(help="seed of the fixed truth")] = None,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/experiment"),
-    recovery: Annotated[bool | None, typer.Option(
-        "--recovery/--no-recovery", help="reinitialise lost particle filters (default: off)")] = None,
-    workers: Annotated[int | None, typer.Option(help="worker processes (default: all cores)")] = None,
+    recovery: Annotated[
+        bool | None,
+        typer.Option(
+            "--recovery/--no-recovery", help="reinitialise lost particle filters (default: off)"
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="worker processes (default: all cores)")
+    ] = None,
     batch_size: Annotated[int | None, typer.Option(help="runs per vectorised batch")] = None,
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
@@ -96,10 +110,20 @@ def experiment(
     from tltrack.experiment import run_and_save
 
     cfg = build_config(
-        config, scenario=scenario, preset=preset, particles=particles, runs=runs,
-        source_intensity=source_intensity, primary_intensity=primary_intensity, truth=truth,
-        seed=seed, truth_seed=truth_seed, sources=sources, source_fault=source_fault,
-        transfer_budget=transfer_budget, recovery=recovery,
+        config,
+        scenario=scenario,
+        preset=preset,
+        particles=particles,
+        runs=runs,
+        source_intensity=source_intensity,
+        primary_intensity=primary_intensity,
+        truth=truth,
+        seed=seed,
+        truth_seed=truth_seed,
+        sources=sources,
+        source_fault=source_fault,
+        transfer_budget=transfer_budget,
+        recovery=recovery,
     )
     names = [n.strip() for n in filters.split(",") if n.strip()]
     try:
@@ -110,8 +134,14 @@ def experiment(
         raise typer.Exit(2) from None
     with progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
-        doc = run_and_save(cfg, names, out, workers=workers, batch_size=batch_size,
-                           progress=lambda n: bar.advance(task, n))
+        doc = run_and_save(
+            cfg,
+            names,
+            out,
+            workers=workers,
+            batch_size=batch_size,
+            progress=lambda n: bar.advance(task, n),
+        )
     _print_table(doc)
     console.print(f"wrote {out / 'results.json'}, {out / 'rmse.png'}, {out / 'trajectory.png'}")
 
@@ -124,8 +154,13 @@ def _print_table(doc: dict[str, Any]) -> None:
         t.add_column(col, justify="right" if col != "filter" else "left")
     for name, r in doc["filters"].items():
         ms = r["ms_per_step"]
-        t.add_row(name, f"{r['rmse_overall']:.2f}", f"{r['lost_fraction']:.1%}", f"{r['nees']:.2f}",
-                  "-" if ms is None else f"{ms:.3f}")
+        t.add_row(
+            name,
+            f"{r['rmse_overall']:.2f}",
+            f"{r['lost_fraction']:.1%}",
+            f"{r['nees']:.2f}",
+            "-" if ms is None else f"{ms:.3f}",
+        )
     Console().print(t)
 
 
@@ -173,8 +208,9 @@ def reproduce(
     all_jobs = rep.jobs(base)
     with progress_bar(runs, "reproduce") as bar:
         tasks = {j.label: bar.add_task(j.label, total=runs) for j in all_jobs}
-        docs = rep.run_all(base, out, workers=workers,
-                           progress=lambda label, n: bar.advance(tasks[label], n))
+        docs = rep.run_all(
+            base, out, workers=workers, progress=lambda label, n: bar.advance(tasks[label], n)
+        )
     console.print(f"wrote {rep.report(docs, out)}")
 
 
@@ -233,14 +269,18 @@ def demo(
 
             page = launch.start(stack, port, host)
             if not launch.wait_ready(page, 30):
-                console.print(f"[red]error:[/red] the dashboard did not start (port {port} "
-                              f"taken?); see {out / 'logs' / 'dashboard.log'}")
+                console.print(
+                    f"[red]error:[/red] the dashboard did not start (port {port} "
+                    f"taken?); see {out / 'logs' / 'dashboard.log'}"
+                )
                 raise typer.Exit(1)
             sim_env = launch.sim_env()  # sensor_sim also waits for the dashboard: no step missed
             console.print(f"dashboard: [bold]{page}[/bold]  (Prometheus metrics: {page}metrics)")
-        stack.start_service("sensor_sim",
-                            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed),
-                            env=sim_env)
+        stack.start_service(
+            "sensor_sim",
+            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed),
+            env=sim_env,
+        )
         budget = steps * (1.0 if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
         with progress_bar(steps, "episode") as bar:
             task = bar.add_task("episode", total=None)
@@ -259,8 +299,10 @@ def demo(
         raise typer.Exit(1)
     if not serve:
         print_summary(summary)
-        console.print("live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
-                      "(Prometheus metrics at /metrics)")
+        console.print(
+            "live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
+            "(Prometheus metrics at /metrics)"
+        )
     if json_out:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1))
@@ -295,7 +337,9 @@ def bench_live(
     particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
     pace: Annotated[float, typer.Option(help="steps/s for the latency run")] = 50.0,
     steps: Annotated[int, typer.Option(help="steps per episode")] = 500,
-    rates: Annotated[str, typer.Option(help="step rates to try, ascending")] = "100,200,300,500,800",
+    rates: Annotated[
+        str, typer.Option(help="step rates to try, ascending")
+    ] = "100,200,300,500,800",
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
 ) -> None:
     """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate.

@@ -1,13 +1,13 @@
 """One validated configuration for every experiment, service and test.
 
-The seed paper's Table 1 is the default preset, ``paper``. NOTES.md explains why a second preset,
-``arasaratnam-haykin``, exists: the seed prints q2 = 1.75e-2 and P0(omega) = 0.1, which look like unit
-slips of the cubature-KF benchmark it says it copies (q2 = 1.75e-4, P0(omega) = 1e-4). Both keep the
-seed's Q_v form.
+The seed paper's Table 1 is the default preset, ``paper``. NOTES.md explains why a second
+preset, ``arasaratnam-haykin``, exists: the seed prints q2 = 1.75e-2 and P0(omega) = 0.1, which
+look like unit slips of the cubature-KF benchmark it says it copies (q2 = 1.75e-4,
+P0(omega) = 1e-4). Both keep the seed's Q_v form.
 
-A configuration is built from a scenario and a preset; any field given explicitly (from a TOML or JSON
-file, or a CLI flag) overrides the preset's value. Unknown fields are refused, so a typo never passes
-silently.
+A configuration is built from a scenario and a preset; any field given explicitly (from a TOML or
+JSON file, or a CLI flag) overrides the preset's value. Unknown fields are refused, so a typo never
+passes silently.
 """
 
 from __future__ import annotations
@@ -191,7 +191,9 @@ def load_config(path: str | Path, **overrides: Any) -> Config:
     try:
         data = tomllib.loads(text) if p.suffix.lower() == ".toml" else json.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
-        raise ConfigError(f"{p}: not valid {p.suffix.lstrip('.').upper() or 'JSON'}: {err}") from None
+        raise ConfigError(
+            f"{p}: not valid {p.suffix.lstrip('.').upper() or 'JSON'}: {err}"
+        ) from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: the top level must be a table/object")
     return make_config(data, **overrides)

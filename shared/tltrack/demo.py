@@ -44,10 +44,18 @@ class Stack:
         self.logs.mkdir(parents=True, exist_ok=True)
         log = open(self.logs / f"{name}.log", "ab")  # noqa: SIM115 (closed in stop())
         self._files.append(log)
-        full_env = {**os.environ, "TLTRACK_ZENOH_ENDPOINTS": json.dumps([self.endpoint]),
-                    "PYTHONUNBUFFERED": "1", **self.env, **(env or {})}
+        full_env = {
+            **os.environ,
+            "TLTRACK_ZENOH_ENDPOINTS": json.dumps([self.endpoint]),
+            "PYTHONUNBUFFERED": "1",
+            **self.env,
+            **(env or {}),
+        }
         self.procs[name] = subprocess.Popen(
-            [sys.executable, *argv], stdout=log, stderr=subprocess.STDOUT, env=full_env,
+            [sys.executable, *argv],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=full_env,
             start_new_session=True,
         )
 
@@ -71,8 +79,9 @@ class Stack:
 
     def stop(self, timeout: float = 10.0) -> dict[str, int | None]:
         """SIGTERM everything (services first, router last); SIGKILL what outlives ``timeout``."""
-        order = [n for n in self.procs if n != "router"] + (["router"] if "router" in self.procs
-                                                               else [])
+        order = [n for n in self.procs if n != "router"] + (
+            ["router"] if "router" in self.procs else []
+        )
         for name in order:
             p = self.procs[name]
             if p.poll() is None:
@@ -138,9 +147,23 @@ def serve_until_interrupted(stack: Stack, name: str) -> None:
         pass
 
 
-def sim_flags(steps: int, particles: int, pace: float, realtime: bool, preset: str,
-              truth: str, seed: int, episodes: int = 1) -> list[str]:
-    flags = [f"--steps={steps}", f"--particles={particles}", f"--pace={pace}",
-             f"--preset={preset}", f"--truth={truth}", f"--seed={seed}",
-             f"--episodes={episodes}"]
+def sim_flags(
+    steps: int,
+    particles: int,
+    pace: float,
+    realtime: bool,
+    preset: str,
+    truth: str,
+    seed: int,
+    episodes: int = 1,
+) -> list[str]:
+    flags = [
+        f"--steps={steps}",
+        f"--particles={particles}",
+        f"--pace={pace}",
+        f"--preset={preset}",
+        f"--truth={truth}",
+        f"--seed={seed}",
+        f"--episodes={episodes}",
+    ]
     return [*flags, "--realtime=true"] if realtime else flags

@@ -20,12 +20,15 @@ def episode(pace: float, steps: int, particles: int, tmp: Path) -> dict[str, Any
     endpoint = f"tcp/127.0.0.1:{demo.free_port()}"
     with demo.Stack(endpoint, tmp / f"logs-{pace:g}") as stack:
         stack.start_router()
-        stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db),
-                                           "TLTRACK_SCORER_GRACE_S": "2"})
+        stack.start_service(
+            "scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "2"}
+        )
         stack.start_service("primary_tracker")
         stack.start_service("source_tracker")
-        stack.start_service("sensor_sim", *demo.sim_flags(
-            steps, particles, pace, False, "arasaratnam-haykin", "fixed", 0))
+        stack.start_service(
+            "sensor_sim",
+            *demo.sim_flags(steps, particles, pace, False, "arasaratnam-haykin", "fixed", 0),
+        )
         stack.wait("sensor_sim", steps / pace + 120)
         summary = demo.wait_for_scored(endpoint, 1, 60)
     return summary or {}
@@ -50,5 +53,10 @@ def run(particles: int, pace: float, steps: int, rates: list[float]) -> dict[str
             if not ok:
                 break
             best = rate
-    return {"particles": particles, "pace": pace, "latency_ms": at_pace.get("latency_ms"),
-            "max_sustained_steps_per_s": best, "rates_tried": rates}
+    return {
+        "particles": particles,
+        "pace": pace,
+        "latency_ms": at_pace.get("latency_ms"),
+        "max_sustained_steps_per_s": best,
+        "rates_tried": rates,
+    }

@@ -381,7 +381,7 @@ def _decode(
         raise MessageRejected("unknown_version", f"schema_version {version!r}")
     tag = data.get("type")
     candidates = expected_type if isinstance(expected_type, tuple) else (expected_type,)
-    chosen = next((t for t in candidates if t.TYPE == tag), None)
+    chosen = next((t for t in candidates if tag == t.TYPE), None)
     if chosen is None:
         wanted = " or ".join(repr(t.TYPE) for t in candidates)
         raise MessageRejected("wrong_type", f"type {tag!r}, expected {wanted}")

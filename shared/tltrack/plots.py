@@ -13,11 +13,11 @@ from typing import Any
 import matplotlib
 
 matplotlib.use("Agg")  # files only: the machines are headless
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import NDArray
 
-from tltrack.models.motion import POS  # noqa: E402
+from tltrack.models.motion import POS
 
 _STYLE = {"pf": "tab:blue", "ukf": "tab:green", "ckf3": "tab:red", "ckf5": "tab:olive"}
 
@@ -38,8 +38,14 @@ def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
         ax.plot(k, r["rmse_per_step"], label=f"{name} ({r['rmse_overall']:.2f} m)", **_style(name))
     for label, bound in doc.get("pcrlb", {}).items():
         k = np.arange(1, len(bound) + 1)
-        ax.plot(k, bound, color="grey", lw=1, ls="-" if label == "primary" else "--",
-                label=f"PCRLB, {label.replace('_', ' ')}")
+        ax.plot(
+            k,
+            bound,
+            color="grey",
+            lw=1,
+            ls="-" if label == "primary" else "--",
+            label=f"PCRLB, {label.replace('_', ' ')}",
+        )
     ax.set_xlabel("time step k [s]")
     ax.set_ylabel("position RMSE [m]")
     ax.set_title(title or _describe(doc))
@@ -49,7 +55,10 @@ def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
 
 
 def trajectory(
-    truth: NDArray[np.float64], tracks: Mapping[str, NDArray[np.float64]], path: Path, title: str = ""
+    truth: NDArray[np.float64],
+    tracks: Mapping[str, NDArray[np.float64]],
+    path: Path,
+    title: str = "",
 ) -> Path:
     """The true path (x_0..x_K) and each filter's estimates for one run (cf. the paper's Fig. 4)."""
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
@@ -82,8 +91,15 @@ def curves(
     for name, ys in series.items():
         ax.plot(x, ys, label=name, **{**_style(name), "marker": "o", "markevery": 1})
     for name, ys in (reference or {}).items():
-        ax.plot(x, ys, ls="none", marker="s", mfc="none", color=_style(name)["color"],
-                label=f"{name} (paper)")
+        ax.plot(
+            x,
+            ys,
+            ls="none",
+            marker="s",
+            mfc="none",
+            color=_style(name)["color"],
+            label=f"{name} (paper)",
+        )
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -94,8 +110,10 @@ def curves(
 
 def _describe(doc: Mapping[str, Any]) -> str:
     c = doc["config"]
-    return (f"scenario {c['scenario']}, preset {c['preset']}, truth {c['truth']}, "
-            f"I_p = {c['primary_intensity']:g}, N = {c['particles']}, {c['runs']} runs")
+    return (
+        f"scenario {c['scenario']}, preset {c['preset']}, truth {c['truth']}, "
+        f"I_p = {c['primary_intensity']:g}, N = {c['particles']}, {c['runs']} runs"
+    )
 
 
 def _save(fig: Any, path: Path) -> Path:

@@ -80,12 +80,22 @@ class Job:
 def jobs(base: Config) -> list[Job]:
     """Every Monte-Carlo experiment the section needs, each run once."""
     ct = base.with_(scenario="ct", particles=6000)
-    out = [Job("s1", base.with_(scenario="cv", particles=6000, primary_intensity=4),
-               PF_FILTERS + KF_FILTERS[:4])]
-    out += [Job(f"s2_ip{i}", ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
-            for i in INTENSITIES]
-    out += [Job(f"s2_n{n}", ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
-            for n in PARTICLES if n != 6000]
+    out = [
+        Job(
+            "s1",
+            base.with_(scenario="cv", particles=6000, primary_intensity=4),
+            PF_FILTERS + KF_FILTERS[:4],
+        )
+    ]
+    out += [
+        Job(f"s2_ip{i}", ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
+        for i in INTENSITIES
+    ]
+    out += [
+        Job(f"s2_n{n}", ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
+        for n in PARTICLES
+        if n != 6000
+    ]
     return out
 
 
@@ -137,29 +147,61 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         "",
         "## Table 2 (Scenario 2, I_p = 4)",
         "",
-        _row(["filter", "points", "RMSE iso (paper)", "RMSE iso (ours)", "diff",
-              "RMSE TL (paper)", "RMSE TL (ours)", "diff", "ms iso (paper / ours)",
-              "ms TL (paper / ours)", "lost iso / TL"]),
+        _row(
+            [
+                "filter",
+                "points",
+                "RMSE iso (paper)",
+                "RMSE iso (ours)",
+                "diff",
+                "RMSE TL (paper)",
+                "RMSE TL (ours)",
+                "diff",
+                "ms iso (paper / ours)",
+                "ms TL (paper / ours)",
+                "lost iso / TL",
+            ]
+        ),
         _row(["---"] * 11),
     ]
     for (kind, n), (r_iso, t_iso, r_tl, t_tl) in TABLE2.items():
         res = f["s2_ip4"] if n in (None, 6000) else f[f"s2_n{n}"]
         iso, tl = res[kind], res[f"tl-{kind}"]
         points = n or {"ckf3": 10, "ukf": 11, "ckf5": 51}[kind]
-        lines.append(_row([
-            kind.upper(), points, r_iso, _fmt(iso["rmse_overall"]),
-            _fmt(iso["rmse_overall"] - r_iso), r_tl, _fmt(tl["rmse_overall"]),
-            _fmt(tl["rmse_overall"] - r_tl),
-            f"{t_iso} / {_fmt(iso['ms_per_step'], 3)}", f"{t_tl} / {_fmt(tl['ms_per_step'], 3)}",
-            f"{iso['lost_fraction']:.1%} / {tl['lost_fraction']:.1%}",
-        ]))
-    lines += ["", "## RMSE(k) at the steps the text quotes (N = 6000, I_p = 4)", "",
-              _row(["scenario", "filter", "k", "paper", "ours", "diff"]), _row(["---"] * 6)]
+        lines.append(
+            _row(
+                [
+                    kind.upper(),
+                    points,
+                    r_iso,
+                    _fmt(iso["rmse_overall"]),
+                    _fmt(iso["rmse_overall"] - r_iso),
+                    r_tl,
+                    _fmt(tl["rmse_overall"]),
+                    _fmt(tl["rmse_overall"] - r_tl),
+                    f"{t_iso} / {_fmt(iso['ms_per_step'], 3)}",
+                    f"{t_tl} / {_fmt(tl['ms_per_step'], 3)}",
+                    f"{iso['lost_fraction']:.1%} / {tl['lost_fraction']:.1%}",
+                ]
+            )
+        )
+    lines += [
+        "",
+        "## RMSE(k) at the steps the text quotes (N = 6000, I_p = 4)",
+        "",
+        _row(["scenario", "filter", "k", "paper", "ours", "diff"]),
+        _row(["---"] * 6),
+    ]
     for (scen, name, k), ref in RMSE_AT_K.items():
         ours = (f["s1"] if scen == "cv" else s2)[name]["rmse_per_step"][k - 1]
         lines.append(_row([scen, name, k, ref, _fmt(ours), _fmt(ours - ref)]))
-    lines += ["", "## Overall RMSE against I_p (N = 6000)", "",
-              _row(["I_p", *(n for n in PF_FILTERS + KF_FILTERS)]), _row(["---"] * 9)]
+    lines += [
+        "",
+        "## Overall RMSE against I_p (N = 6000)",
+        "",
+        _row(["I_p", *(n for n in PF_FILTERS + KF_FILTERS)]),
+        _row(["---"] * 9),
+    ]
     for i in INTENSITIES:
         row = [f"{i}"]
         for name in PF_FILTERS + KF_FILTERS:
@@ -167,8 +209,13 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
             ref_ip = RMSE_AT_IP.get((name, i))
             row.append(_fmt(ours) + ("" if ref_ip is None else f" (paper {ref_ip:.2f})"))
         lines.append(_row(row))
-    lines += ["", "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s", "",
-              _row(["Delta I", "pf", "ukf", "ckf3", "ckf5"]), _row(["---"] * 5)]
+    lines += [
+        "",
+        "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s",
+        "",
+        _row(["Delta I", "pf", "ukf", "ckf3", "ckf5"]),
+        _row(["---"] * 5),
+    ]
     kinds = ["pf", "ukf", "ckf3", "ckf5"]
     deltas: dict[str, list[float]] = {k: [] for k in kinds}
     for i in INTENSITIES:
@@ -179,40 +226,75 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
             ref_d = DELTA_AT_DI.get((kind, i - 1))
             row.append(_fmt(d) + ("" if ref_d is None else f" (paper {ref_d:.2f})"))
         lines.append(_row(row))
-    lines += ["", "## Share of runs that lost track (final error > threshold)", "",
-              _row(["job", *(n for n in PF_FILTERS + KF_FILTERS)]), _row(["---"] * 9)]
+    lines += [
+        "",
+        "## Share of runs that lost track (final error > threshold)",
+        "",
+        _row(["job", *(n for n in PF_FILTERS + KF_FILTERS)]),
+        _row(["---"] * 9),
+    ]
     for label, res in f.items():
-        lines.append(_row([label, *(f"{res[n]['lost_fraction']:.1%}" if n in res else "–"
-                                    for n in PF_FILTERS + KF_FILTERS)]))
+        lines.append(
+            _row(
+                [
+                    label,
+                    *(
+                        f"{res[n]['lost_fraction']:.1%}" if n in res else "–"
+                        for n in PF_FILTERS + KF_FILTERS
+                    ),
+                ]
+            )
+        )
     wall = sum(d.get("wall_s", 0.0) for d in docs.values())
-    lines += ["", f"Wall time of all jobs: {wall / 60:.1f} min.", "",
-              "Figures: ![s1](fig_s1_rmse.png) ![s2](fig_s2_rmse.png) ![ip](fig_rmse_vs_ip.png) "
-              "![delta](fig_delta_rmse.png) ![n](fig_rmse_time_vs_n.png)", ""]
+    lines += [
+        "",
+        f"Wall time of all jobs: {wall / 60:.1f} min.",
+        "",
+        "Figures: ![s1](fig_s1_rmse.png) ![s2](fig_s2_rmse.png) ![ip](fig_rmse_vs_ip.png) "
+        "![delta](fig_delta_rmse.png) ![n](fig_rmse_time_vs_n.png)",
+        "",
+    ]
 
     plots.rmse_vs_time(docs["s1"], out / "fig_s1_rmse.png", "Scenario 1: RMSE against time")
     plots.rmse_vs_time(docs["s2_ip4"], out / "fig_s2_rmse.png", "Scenario 2: RMSE against time")
     plots.curves(
         INTENSITIES,
-        {n: [f[f"s2_ip{i}"][n]["rmse_overall"] for i in INTENSITIES] for n in PF_FILTERS + KF_FILTERS},
-        out / "fig_rmse_vs_ip.png", xlabel="primary noise intensity I_p", ylabel="overall RMSE [m]",
+        {
+            n: [f[f"s2_ip{i}"][n]["rmse_overall"] for i in INTENSITIES]
+            for n in PF_FILTERS + KF_FILTERS
+        },
+        out / "fig_rmse_vs_ip.png",
+        xlabel="primary noise intensity I_p",
+        ylabel="overall RMSE [m]",
         title="Scenario 2: overall RMSE against I_p",
-        reference={n: [RMSE_AT_IP.get((n, i), float("nan")) for i in INTENSITIES]
-                   for n in ("pf", "tl-pf", "tl-ckf5")},
+        reference={
+            n: [RMSE_AT_IP.get((n, i), float("nan")) for i in INTENSITIES]
+            for n in ("pf", "tl-pf", "tl-ckf5")
+        },
     )
     plots.curves(
-        [i - 1 for i in INTENSITIES], deltas, out / "fig_delta_rmse.png",
-        xlabel="Delta I_w = |I_p - I_s|", ylabel="Delta RMSE [m]",
+        [i - 1 for i in INTENSITIES],
+        deltas,
+        out / "fig_delta_rmse.png",
+        xlabel="Delta I_w = |I_p - I_s|",
+        ylabel="Delta RMSE [m]",
         title="Scenario 2: RMSE gain of transfer against Delta I",
-        reference={k: [DELTA_AT_DI.get((k, i - 1), float("nan")) for i in INTENSITIES]
-                   for k in kinds},
+        reference={
+            k: [DELTA_AT_DI.get((k, i - 1), float("nan")) for i in INTENSITIES] for k in kinds
+        },
     )
     by_n = {n: (s2 if n == 6000 else f[f"s2_n{n}"]) for n in PARTICLES}
     plots.curves(
-        PARTICLES, {n: [by_n[p][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
-        out / "fig_rmse_time_vs_n.png", xlabel="particles N_s", ylabel="overall RMSE [m]",
+        PARTICLES,
+        {n: [by_n[p][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
+        out / "fig_rmse_time_vs_n.png",
+        xlabel="particles N_s",
+        ylabel="overall RMSE [m]",
         title="Scenario 2: RMSE against N_s (ms per step in report.md)",
-        reference={"pf": [TABLE2["pf", p][0] for p in PARTICLES],
-                   "tl-pf": [TABLE2["pf", p][2] for p in PARTICLES]},
+        reference={
+            "pf": [TABLE2["pf", p][0] for p in PARTICLES],
+            "tl-pf": [TABLE2["pf", p][2] for p in PARTICLES],
+        },
     )
     path = out / "report.md"
     path.write_text("\n".join(lines))

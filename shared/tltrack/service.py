@@ -46,14 +46,17 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
     try:
         return cls(_cli_parse_args=sys.argv[1:] if argv is None else argv)
     except ValidationError as err:
-        print(f"error: invalid settings for {cls.__name__}: {describe_validation_error(err)}",
-              file=sys.stderr)
+        print(
+            f"error: invalid settings for {cls.__name__}: {describe_validation_error(err)}",
+            file=sys.stderr,
+        )
         raise SystemExit(2) from None
 
 
 def setup_logging(level: str = "INFO") -> None:
     logging.basicConfig(
-        level=level.upper(), stream=sys.stderr,
+        level=level.upper(),
+        stream=sys.stderr,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
 

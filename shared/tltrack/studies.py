@@ -30,8 +30,14 @@ Progress = Callable[[int], None] | None
 
 
 def base(runs: int, seed: int = 0) -> Config:
-    return make_config(preset="arasaratnam-haykin", truth="noise-free", primary_intensity=4,
-                       particles=3000, runs=runs, seed=seed)
+    return make_config(
+        preset="arasaratnam-haykin",
+        truth="noise-free",
+        primary_intensity=4,
+        particles=3000,
+        runs=runs,
+        seed=seed,
+    )
 
 
 def mc_error(a: FilterResult, b: FilterResult) -> float:
@@ -46,25 +52,52 @@ def _row(cells: list[Any]) -> str:
 
 def robust(runs: int, out: Path, progress: Progress = None) -> Path:
     """pf, tl-pf and robust-tl-pf against an honest, biased, diverged and stale source."""
-    res = {f: run_experiment(base(runs).with_(sources=[{"id": "s1", "fault": f}]),
-                             ["pf", "tl-pf", "robust-tl-pf"], progress=progress)
-           for f in FAULTS}
+    res = {
+        f: run_experiment(
+            base(runs).with_(sources=[{"id": "s1", "fault": f}]),
+            ["pf", "tl-pf", "robust-tl-pf"],
+            progress=progress,
+        )
+        for f in FAULTS
+    }
     gain = {f: r["pf"].rmse_overall - r["tl-pf"].rmse_overall for f, r in res.items()}
-    lines = ["# Robust transfer against faulty sources", "",
-             f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs. "
-             "MC error = 2 x SE of the paired per-run difference.", "",
-             _row(["source", "pf", "tl-pf", "robust-tl-pf", "robust - pf (MC err)",
-                   "robust gain / tl gain", "transfer rate (robust)", "lost pf / tl / robust"]),
-             _row(["---"] * 8)]
+    lines = [
+        "# Robust transfer against faulty sources",
+        "",
+        f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs. "
+        "MC error = 2 x SE of the paired per-run difference.",
+        "",
+        _row(
+            [
+                "source",
+                "pf",
+                "tl-pf",
+                "robust-tl-pf",
+                "robust - pf (MC err)",
+                "robust gain / tl gain",
+                "transfer rate (robust)",
+                "lost pf / tl / robust",
+            ]
+        ),
+        _row(["---"] * 8),
+    ]
     for f, r in res.items():
         iso, tl, rob = r["pf"], r["tl-pf"], r["robust-tl-pf"]
         share = ((iso.rmse_overall - rob.rmse_overall) / gain[f]) if f == "none" else None
-        lines.append(_row([
-            f, f"{iso.rmse_overall:.2f}", f"{tl.rmse_overall:.2f}", f"{rob.rmse_overall:.2f}",
-            f"{rob.rmse_overall - iso.rmse_overall:+.2f} ({mc_error(rob, iso):.2f})",
-            "–" if share is None else f"{share:.1%}", f"{rob.transfer_rate:.1%}",
-            f"{iso.lost_fraction:.0%} / {tl.lost_fraction:.0%} / {rob.lost_fraction:.0%}",
-        ]))
+        lines.append(
+            _row(
+                [
+                    f,
+                    f"{iso.rmse_overall:.2f}",
+                    f"{tl.rmse_overall:.2f}",
+                    f"{rob.rmse_overall:.2f}",
+                    f"{rob.rmse_overall - iso.rmse_overall:+.2f} ({mc_error(rob, iso):.2f})",
+                    "–" if share is None else f"{share:.1%}",
+                    f"{rob.transfer_rate:.1%}",
+                    f"{iso.lost_fraction:.0%} / {tl.lost_fraction:.0%} / {rob.lost_fraction:.0%}",
+                ]
+            )
+        )
     return _write(out, "robust", lines, {f: _plain(r) for f, r in res.items()})
 
 
@@ -74,8 +107,11 @@ def sources(runs: int, out: Path, progress: Progress = None) -> Path:
     setups: dict[str, list[dict[str, Any]]] = {
         f"{n} honest": [{"id": f"s{i + 1}"} for i in range(n)] for n in (1, 2, 4)
     }
-    setups |= {f"{n - 1} honest + 1 biased": [{"id": f"s{i + 1}"} for i in range(n - 1)]
-               + [{"id": f"s{n}", "fault": "bias"}] for n in (2, 4)}
+    setups |= {
+        f"{n - 1} honest + 1 biased": [{"id": f"s{i + 1}"} for i in range(n - 1)]
+        + [{"id": f"s{n}", "fault": "bias"}]
+        for n in (2, 4)
+    }
     res, bounds = {}, {}
     for label, srcs in setups.items():
         cfg = base(runs).with_(sources=srcs)
@@ -83,42 +119,73 @@ def sources(runs: int, out: Path, progress: Progress = None) -> Path:
         bounds[label] = float(np.mean(_bound_all(cfg)))
     one, two = res["1 honest"]["tl-pf"], res["2 honest"]["tl-pf"]
     mixed = res["1 honest + 1 biased"]["robust-tl-pf"]
-    lines = ["# Several source operators", "",
-             f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs; sources at "
-             "the origin, I_s = 1; the biased one has a 10-sigma bearing bias.", "",
-             _row(["sources", *filters, "PCRLB, all data (mean over k)"]), _row(["---"] * 6)]
+    lines = [
+        "# Several source operators",
+        "",
+        f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs; sources at "
+        "the origin, I_s = 1; the biased one has a 10-sigma bearing bias.",
+        "",
+        _row(["sources", *filters, "PCRLB, all data (mean over k)"]),
+        _row(["---"] * 6),
+    ]
     for label, r in res.items():
-        lines.append(_row([label, *(f"{r[f].rmse_overall:.2f}" for f in filters),
-                           f"{bounds[label]:.2f}"]))
-    lines += ["", "Checks (difference, MC error):", "",
-              f"- 2 honest vs 1 honest, tl-pf: {two.rmse_overall - one.rmse_overall:+.2f} "
-              f"({mc_error(two, one):.2f})",
-              f"- 1 honest + 1 biased, robust-tl-pf vs isolated pf: "
-              f"{mixed.rmse_overall - res['1 honest + 1 biased']['pf'].rmse_overall:+.2f} "
-              f"({mc_error(mixed, res['1 honest + 1 biased']['pf']):.2f})",
-              f"- 1 honest + 1 biased, robust-tl-pf vs tl-pf with the honest source alone: "
-              f"{mixed.rmse_overall - one.rmse_overall:+.2f} ({mc_error(mixed, one):.2f})"]
+        lines.append(
+            _row([label, *(f"{r[f].rmse_overall:.2f}" for f in filters), f"{bounds[label]:.2f}"])
+        )
+    lines += [
+        "",
+        "Checks (difference, MC error):",
+        "",
+        f"- 2 honest vs 1 honest, tl-pf: {two.rmse_overall - one.rmse_overall:+.2f} "
+        f"({mc_error(two, one):.2f})",
+        f"- 1 honest + 1 biased, robust-tl-pf vs isolated pf: "
+        f"{mixed.rmse_overall - res['1 honest + 1 biased']['pf'].rmse_overall:+.2f} "
+        f"({mc_error(mixed, res['1 honest + 1 biased']['pf']):.2f})",
+        f"- 1 honest + 1 biased, robust-tl-pf vs tl-pf with the honest source alone: "
+        f"{mixed.rmse_overall - one.rmse_overall:+.2f} ({mc_error(mixed, one):.2f})",
+    ]
     labels = list(res)
-    plots.curves(range(len(labels)), {f: [res[lb][f].rmse_overall for lb in labels]
-                                      for f in filters},
-                 out / "sources.png", xlabel="configuration: " + " | ".join(labels),
-                 ylabel="overall RMSE [m]", title="Primary RMSE against the sources it hears")
+    plots.curves(
+        range(len(labels)),
+        {f: [res[lb][f].rmse_overall for lb in labels] for f in filters},
+        out / "sources.png",
+        xlabel="configuration: " + " | ".join(labels),
+        ylabel="overall RMSE [m]",
+        title="Primary RMSE against the sources it hears",
+    )
     return _write(out, "sources", lines, {lb: _plain(r) for lb, r in res.items()})
 
 
 def budget(runs: int, out: Path, progress: Progress = None) -> Path:
     """RMSE against the share of steps with a transfer (the hybrid primary's budget)."""
-    res = {b: run_experiment(base(runs).with_(transfer_budget=b), ["pf", "robust-tl-pf"],
-                             progress=progress) for b in BUDGETS}
+    res = {
+        b: run_experiment(
+            base(runs).with_(transfer_budget=b), ["pf", "robust-tl-pf"], progress=progress
+        )
+        for b in BUDGETS
+    }
     rate = [res[b]["robust-tl-pf"].transfer_rate for b in BUDGETS]
     rmse = [res[b]["robust-tl-pf"].rmse_overall for b in BUDGETS]
-    plots.curves(rate, {"robust-tl-pf": rmse, "pf": [res[b]["pf"].rmse_overall for b in BUDGETS]},
-                 out / "budget.png", xlabel="share of steps with a transfer",
-                 ylabel="overall RMSE [m]", title="RMSE against the transfer rate")
-    lines = ["# Communication budget", "", f"{runs} runs, N = 3000.", "",
-             _row(["budget", "transfer rate", "RMSE robust-tl-pf", "RMSE pf"]), _row(["---"] * 4)]
-    lines += [_row([b, f"{r:.1%}", f"{m:.2f}", f"{res[b]['pf'].rmse_overall:.2f}"])
-              for b, r, m in zip(BUDGETS, rate, rmse, strict=True)]
+    plots.curves(
+        rate,
+        {"robust-tl-pf": rmse, "pf": [res[b]["pf"].rmse_overall for b in BUDGETS]},
+        out / "budget.png",
+        xlabel="share of steps with a transfer",
+        ylabel="overall RMSE [m]",
+        title="RMSE against the transfer rate",
+    )
+    lines = [
+        "# Communication budget",
+        "",
+        f"{runs} runs, N = 3000.",
+        "",
+        _row(["budget", "transfer rate", "RMSE robust-tl-pf", "RMSE pf"]),
+        _row(["---"] * 4),
+    ]
+    lines += [
+        _row([b, f"{r:.1%}", f"{m:.2f}", f"{res[b]['pf'].rmse_overall:.2f}"])
+        for b, r, m in zip(BUDGETS, rate, rmse, strict=True)
+    ]
     return _write(out, "budget", lines, {str(b): _plain(r) for b, r in res.items()})
 
 
@@ -129,8 +196,14 @@ def _bound_all(cfg: Config) -> np.ndarray:
 
 
 def _plain(r: dict[str, FilterResult]) -> dict[str, Any]:
-    return {n: {"rmse_overall": v.rmse_overall, "lost_fraction": v.lost_fraction,
-                "transfer_rate": v.transfer_rate} for n, v in r.items()}
+    return {
+        n: {
+            "rmse_overall": v.rmse_overall,
+            "lost_fraction": v.lost_fraction,
+            "transfer_rate": v.transfer_rate,
+        }
+        for n, v in r.items()
+    }
 
 
 def _write(out: Path, name: str, lines: list[str], data: dict[str, Any]) -> Path:

@@ -15,20 +15,37 @@ def _ms(v: float | None) -> str:
 def table(summary: dict[str, Any]) -> Table:
     eps = summary.get("episodes", [])
     t = Table(title=f"tltrack scorer: {len(eps)} episode(s)")
-    for col in ("filter", "RMSE [m]", "steps", "gaps", "with transfer", "p50 ms", "p95 ms",
-                "p99 ms"):
+    for col in (
+        "filter",
+        "RMSE [m]",
+        "steps",
+        "gaps",
+        "with transfer",
+        "p50 ms",
+        "p95 ms",
+        "p99 ms",
+    ):
         t.add_column(col, justify="left" if col == "filter" else "right")
     for name, f in summary.get("filters", {}).items():
         lat = f["latency_ms"]
         rmse = f["rmse_overall"]
-        t.add_row(name, "-" if rmse is None else f"{rmse:.2f}", str(f["steps"]), str(f["gaps"]),
-                  str(f["steps_with_transfer"]), _ms(lat["p50"]), _ms(lat["p95"]),
-                  _ms(lat["p99"]))
+        t.add_row(
+            name,
+            "-" if rmse is None else f"{rmse:.2f}",
+            str(f["steps"]),
+            str(f["gaps"]),
+            str(f["steps_with_transfer"]),
+            _ms(lat["p50"]),
+            _ms(lat["p95"]),
+            _ms(lat["p99"]),
+        )
     m = summary.get("messages", {})
     lat = summary.get("latency_ms", {})
-    t.caption = (f"latency p50/p95/p99: {_ms(lat.get('p50'))}/{_ms(lat.get('p95'))}/"
-                 f"{_ms(lat.get('p99'))} ms; rejected {m.get('rejected_total', 0)}, "
-                 f"dropped {m.get('dropped', 0)}, missing estimates {m.get('missing_estimates', 0)}")
+    t.caption = (
+        f"latency p50/p95/p99: {_ms(lat.get('p50'))}/{_ms(lat.get('p95'))}/"
+        f"{_ms(lat.get('p99'))} ms; rejected {m.get('rejected_total', 0)}, "
+        f"dropped {m.get('dropped', 0)}, missing estimates {m.get('missing_estimates', 0)}"
+    )
     return t
 
 

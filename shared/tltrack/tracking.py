@@ -50,8 +50,7 @@ class SourceEpisode:
         self.name = f"source-{kind}"
         s = sensor(cfg, source_id)
         filt = _filter(cfg, self.name, run, source_id)
-        self.role = Source(filt, s, s.R(intensity(cfg, source_id)),
-                           recovery(parse(self.name), cfg))
+        self.role = Source(filt, s, s.R(intensity(cfg, source_id)), recovery(parse(self.name), cfg))
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
@@ -65,8 +64,9 @@ class PrimaryEpisode:
         self.cfg = cfg
         self.tl_name, self.iso_name = f"tl-{kind}", kind
         self.tl = Primary(_filter(cfg, self.tl_name, run), None, recovery(parse(self.tl_name), cfg))
-        self.iso = Primary(_filter(cfg, self.iso_name, run), None,
-                           recovery(parse(self.iso_name), cfg))
+        self.iso = Primary(
+            _filter(cfg, self.iso_name, run), None, recovery(parse(self.iso_name), cfg)
+        )
 
     def step(
         self, z: Measurement | None, transfers: dict[str, Transfer]
@@ -76,8 +76,9 @@ class PrimaryEpisode:
         ``z=None``: the primary's own measurement never came; the transfers alone update.
         """
         obs = None if z is None else measurement(self.cfg, z, PRIMARY)
-        extra = [transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources
-                 if s.id in transfers]  # the engine's order
+        extra = [
+            transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources if s.id in transfers
+        ]  # the engine's order
         return self.tl.step(obs, extra), self.iso.step(obs)
 
 
@@ -143,11 +144,22 @@ def warm_up(kind: str) -> None:
     sid = cfg.source.id
     src, prim = SourceEpisode(cfg, 0, kind, sid), PrimaryEpisode(cfg, 0, kind)
     for k in (1, 2):
-        z = {i: Measurement(episode="warmup", sender="warmup", k=k, t_sensor=0.0, sensor=i,
-                            z=run.z[i][k - 1]) for i in (PRIMARY, sid)}
+        z = {
+            i: Measurement(
+                episode="warmup", sender="warmup", k=k, t_sensor=0.0, sensor=i, z=run.z[i][k - 1]
+            )
+            for i in (PRIMARY, sid)
+        }
         _, eta = src.step(z[sid])
-        t = Transfer(episode="warmup", sender=sid, k=k, t_sensor=0.0, k_apply=k + 1,
-                     eta=eta.mean[:, 0], P_eta=eta.cov[0])
+        t = Transfer(
+            episode="warmup",
+            sender=sid,
+            k=k,
+            t_sensor=0.0,
+            k_apply=k + 1,
+            eta=eta.mean[:, 0],
+            P_eta=eta.cov[0],
+        )
         prim.step(z[PRIMARY], {sid: t})
 
 

@@ -22,9 +22,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, Run, intensity, sensor, simulate
-from tltrack.engine.faults import transfer_lag
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
@@ -118,7 +118,7 @@ def run_batch(
     """
     model = motion_model(cfg)
     sims: list[Run] = [simulate(cfg, r) for r in runs]
-    B, K = len(sims), cfg.K
+    K = cfg.K
     x0_hat = np.stack([s.x0_hat for s in sims], axis=1)  # (n, B)
     truth = np.stack([s.truth for s in sims], axis=1)  # (K + 1, B, n)
     ids = [PRIMARY, *(s.id for s in cfg.sources)]
@@ -141,10 +141,15 @@ def run_batch(
                 sources[spec.name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
                 scores[reported_name(spec, sid, len(source_ids))] = _Score(K, keep_tracks)
         else:
-            policy = (TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
-                      if spec.role == "robust" else None)
-            primaries[spec.name] = (spec, Primary(build(spec, cfg, model, x0_hat, runs), policy,
-                                                  recovery(spec, cfg)))
+            policy = (
+                TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
+                if spec.role == "robust"
+                else None
+            )
+            primaries[spec.name] = (
+                spec,
+                Primary(build(spec, cfg, model, x0_hat, runs), policy, recovery(spec, cfg)),
+            )
             scores[spec.name] = _Score(K, keep_tracks)
 
     lag = {sid: transfer_lag(cfg, sid) for sid in source_ids}
@@ -161,8 +166,11 @@ def run_batch(
         for name, (spec, prim) in primaries.items():
             extra: list[Observation] = []
             if spec.role in ("tl", "robust"):  # none at k = 1
-                extra = [t for sid in source_ids
-                         if (t := made[spec.source_name, sid].get(k - lag[sid])) is not None]
+                extra = [
+                    t
+                    for sid in source_ids
+                    if (t := made[spec.source_name, sid].get(k - lag[sid])) is not None
+                ]
             elif spec.role == "fusion":
                 extra = [observation(sid, k) for sid in source_ids]
             t0 = time.perf_counter()
@@ -175,8 +183,13 @@ def run_batch(
 
 
 def trace_run(cfg: Config, names: Sequence[str], run: int) -> dict[str, Array]:
-    """Every filter's estimates x_hat_1..x_hat_K of one run, (K, n_x): what a live replay must match."""
-    return {n: s.tracks[0][:, 0, :] for n, s in run_batch(cfg, names, [run], keep_tracks=True).items()}
+    """Every filter's estimates x_hat_1..x_hat_K of one run, (K, n_x).
+
+    What a live replay of the run must match.
+    """
+    return {
+        n: s.tracks[0][:, 0, :] for n, s in run_batch(cfg, names, [run], keep_tracks=True).items()
+    }
 
 
 def _tick(score: _Score, timing: bool, t0: float) -> None:
@@ -226,7 +239,7 @@ def run_experiment(
     progress: Callable[[int], None] | None = None,
     time_steps: bool = True,
 ) -> dict[str, FilterResult]:
-    """Run ``cfg.runs`` runs of every filter; ``progress(n)`` is told as each batch of n finishes."""
+    """Run ``cfg.runs`` runs of every filter; ``progress(n)`` hears of each batch of n runs."""
     bs = batch_size or default_batch_size(cfg.particles, names)
     batches = [list(range(i, min(i + bs, cfg.runs))) for i in range(0, cfg.runs, bs)]
     workers = max(1, min(workers or os.cpu_count() or 1, len(batches)))

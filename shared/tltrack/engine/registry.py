@@ -49,8 +49,8 @@ class FilterSpec:
 
 def parse(name: str) -> FilterSpec:
     """``"tl-ckf5"`` -> FilterSpec("tl-ckf5", "ckf5", "tl"); refuses unknown names clearly."""
-    if name.startswith("robust-tl-") and name[len("robust-tl-"):] in KINDS:
-        return FilterSpec(name, name[len("robust-tl-"):], "robust")  # type: ignore[arg-type]
+    if name.startswith("robust-tl-") and name[len("robust-tl-") :] in KINDS:
+        return FilterSpec(name, name[len("robust-tl-") :], "robust")  # type: ignore[arg-type]
     prefix, _, rest = name.partition("-")
     role: Role = "isolated"
     kind = name
@@ -97,6 +97,9 @@ def build(
         rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id))
         return ParticleFilter(model, x0_hat, P0, cfg.particles, rngs)
     n = model.n
-    rule = {"ukf": lambda: unscented(n, cfg.kappa), "ckf3": lambda: cubature3(n),
-            "ckf5": lambda: cubature5(n)}[spec.kind]()
+    rule = {
+        "ukf": lambda: unscented(n, cfg.kappa),
+        "ckf3": lambda: cubature3(n),
+        "ckf5": lambda: cubature5(n),
+    }[spec.kind]()
     return SigmaPointFilter(model, rule, x0_hat, P0)

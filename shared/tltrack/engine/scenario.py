@@ -52,7 +52,11 @@ def truth(cfg: Config, run: int) -> Array:
         for k in range(1, cfg.K + 1):
             x[k] = model.f(x[k - 1])
         return x
-    g = stream(cfg.truth_seed, 0, "truth") if cfg.truth == "fixed" else stream(cfg.seed, run, "truth")
+    g = (
+        stream(cfg.truth_seed, 0, "truth")
+        if cfg.truth == "fixed"
+        else stream(cfg.seed, run, "truth")
+    )
     eps = g.standard_normal((cfg.K, model.Q_sqrt.shape[1]))
     for k in range(1, cfg.K + 1):
         x[k] = model.f(x[k - 1]) + model.Q_sqrt @ eps[k - 1]

@@ -14,7 +14,7 @@ import numpy as np
 
 
 def stream(seed: int, run: int, purpose: str) -> np.random.Generator:
-    """The generator for one (seed, run, purpose), e.g. purpose ``"tl-pf"`` or ``"meas/primary"``."""
+    """The generator for one (seed, run, purpose), e.g. purpose ``"pf"`` or ``"meas/primary"``."""
     key = zlib.crc32(purpose.encode())
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(run, key))))
 

@@ -13,9 +13,10 @@ biased source that got in once drag the prior along and then always look consist
 transfer when three chi-square gates at ``probability`` pass, once ``min_evidence`` steps have been
 seen: its own NIS; the mean NIS over the last ``window`` steps (an overconfident P_eta); and the
 mean disagreement over the window, n d_bar' S_bar^-1 d_bar ~ chi2(2), which catches a bias or a
-slow drift long before it shows in a single step. A transfer that passes is still tempered in the spirit of Papež &
-Quinn's robust transfer: P_eta_eta is inflated by the window's mean NIS over its expected value 2,
-when that exceeds 1, so a source drifting off pulls less and less before the gate shuts.
+slow drift long before it shows in a single step. A transfer that passes is still tempered in
+the spirit of Papež & Quinn's robust transfer: P_eta_eta is inflated by the window's mean NIS
+over its expected value 2, when that exceeds 1, so a drifting source pulls less and less before
+the gate shuts.
 
 Optionally a communication budget caps the share of steps that use a transfer: a step may use one
 while the run's count stays within ``fraction * k`` (a token bucket, so savings carry over).

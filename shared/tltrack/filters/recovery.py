@@ -37,8 +37,11 @@ class Recovery:
     def lost(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
         d = z.sensor.residual(z.mean[:, :, None], z.sensor.h(pf.x))  # (2, B, N)
         W = np.linalg.inv(z.cov)
-        nis = (W[:, 0, 0, None] * d[0] ** 2 + 2 * W[:, 0, 1, None] * d[0] * d[1]
-               + W[:, 1, 1, None] * d[1] ** 2)
+        nis = (
+            W[:, 0, 0, None] * d[0] ** 2
+            + 2 * W[:, 0, 1, None] * d[0] * d[1]
+            + W[:, 1, 1, None] * d[1] ** 2
+        )
         best = np.min(np.where(np.isfinite(nis), nis, np.inf), axis=1)
         return ~(best <= chi2.ppf(1.0 - self.tail, 2))
 

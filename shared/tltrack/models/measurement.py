@@ -58,7 +58,9 @@ class RangeBearing:
     def mean(self, Z: Array, axis: int) -> Array:
         """Sample mean of measurements along ``axis``; the bearing's is circular."""
         r = Z[0].mean(axis=axis - 1)
-        b = np.arctan2(np.sin(Z[BEARING]).mean(axis=axis - 1), np.cos(Z[BEARING]).mean(axis=axis - 1))
+        b = np.arctan2(
+            np.sin(Z[BEARING]).mean(axis=axis - 1), np.cos(Z[BEARING]).mean(axis=axis - 1)
+        )
         return np.stack([r, b])
 
     def to_position(self, z: Array, P: Array) -> tuple[Array, Array]:

@@ -45,7 +45,7 @@ class MotionModel(Protocol):
 
 
 def _wna_sqrt(T: float, q: float) -> Array:
-    """Square root of one axis' white-noise-acceleration block [[T^4/4, T^3/2], [T^3/2, T^2]] * q."""
+    """Square root of one axis' white-noise-acceleration block q [[T^4/4, T^3/2], [T^3/2, T^2]]."""
     return np.sqrt(q) * np.array([[T * T / 2.0], [T]])
 
 
