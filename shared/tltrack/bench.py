@@ -1,0 +1,237 @@
+"""``tltrack bench``: single-thread step times of the particle filters, side by side in one process.
+
+Every timed filter runs one run (B = 1) of the same scenario (Scenario 2 by default: coordinated
+turn, range-bearing, the paper preset) with the same N, and the steps are interleaved, so the
+machine's noise hits them alike and the ratios are fair even on a busy machine. Reported figures
+are medians over every step of every repeat.
+
+What one "step" is, per name:
+
+- ``pf``: an isolated primary step, predict + update on z_k + estimate;
+- ``tl-pf``: the TL-PF primary step, the same with the source's transfer as a second likelihood;
+- ``source-pf``: a source step (Algorithm 1): update on its z_k + estimate + predict + the
+  predicted-observation moments (eta_hat, P_eta_eta) it transfers;
+- ``numpy-baseline``: the straightforward NumPy SIR of NOTES.md doing the TL-PF primary step:
+  (5, N) layout, noise as Q_sqrt times ``standard_normal``, log-likelihoods with ``hypot`` and
+  ``arctan2``, resampling with ``cumsum`` + ``searchsorted``, then the mean and covariance. It is a
+  yardstick, deliberately untuned;
+- ``stonesoup``: Stone Soup's particle filter (``ParticlePredictor`` with its ``ConstantTurn``
+  model, ``ParticleUpdater`` with ``CartesianToBearingRange`` and systematic resampling, then the
+  mean and covariance); ``None`` when the optional ``stonesoup`` package is not installed.
+
+``speedup`` is a yardstick's median divided by the ``tl-pf`` median.
+"""
+
+from __future__ import annotations
+
+import gc
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.config import Config, make_config
+from tltrack.engine.scenario import PRIMARY, intensity, sensor, simulate
+from tltrack.engine.streams import stream
+from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.transfer import Primary, Source
+from tltrack.models.measurement import wrap_angle
+from tltrack.models.motion import MotionModel, motion_model
+from tltrack.models.observation import Observation
+
+Array = NDArray[np.float64]
+NAMES = ("tl-pf", "pf", "source-pf", "numpy-baseline", "stonesoup")
+
+
+class NumpyBaseline:
+    """The plain NumPy SIR of NOTES.md, one run, (n_x, N) layout: the yardstick, not to be tuned."""
+
+    def __init__(self, model: MotionModel, x0_hat: Array, P0: Array, N: int,
+                 rng: np.random.Generator) -> None:
+        self.model, self.N, self.rng = model, N, rng
+        self.x = x0_hat[:, None] + np.linalg.cholesky(P0) @ rng.standard_normal((len(x0_hat), N))
+
+    def step(self, stmts: list[tuple[Array, Array, tuple[float, float]]]) -> tuple[Array, Array]:
+        """Predict, weight by every (z, R, sensor position), resample, estimate."""
+        L = self.model.Q_sqrt
+        x = self.model.f(self.x) + L @ self.rng.standard_normal((L.shape[1], self.N))
+        logw = np.zeros(self.N)
+        for z, R, (sx, sy) in stmts:
+            dx, dy = x[0] - sx, x[2] - sy
+            d0 = z[0] - np.hypot(dx, dy)
+            d1 = wrap_angle(z[1] - np.arctan2(dy, dx))
+            P = np.linalg.inv(R)
+            logw -= 0.5 * (P[0, 0] * d0 * d0 + 2.0 * P[0, 1] * d0 * d1 + P[1, 1] * d1 * d1)
+        w = np.exp(logw - logw.max())
+        w /= w.sum()
+        cdf = np.cumsum(w)
+        cdf[-1] = 1.0
+        idx = np.searchsorted(cdf, (np.arange(self.N) + self.rng.random()) / self.N, side="right")
+        self.x = x[:, np.minimum(idx, self.N - 1)]
+        mean = self.x.mean(axis=1)
+        d = self.x - mean[:, None]
+        return mean, d @ d.T / self.N + self.model.Q
+
+
+def _stonesoup_stepper(cfg: Config, z: Array, x0_hat: Array, N: int,
+                       seed: int) -> Callable[[int], Any] | None:
+    """One Stone Soup PF step per call ``step(k)`` on the primary's z_k; None without Stone Soup."""
+    try:
+        from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
+        from stonesoup.models.transition.nonlinear import ConstantTurn
+        from stonesoup.predictor.particle import ParticlePredictor
+        from stonesoup.resampler.particle import SystematicResampler
+        from stonesoup.types.array import StateVector, StateVectors
+        from stonesoup.types.detection import Detection
+        from stonesoup.types.hypothesis import SingleHypothesis
+        from stonesoup.types.state import ParticleState
+        from stonesoup.updater.particle import ParticleUpdater
+    except ImportError:
+        return None
+    import datetime
+
+    np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
+    s = sensor(cfg, PRIMARY)
+    R = s.R(intensity(cfg, PRIMARY))
+    meas = CartesianToBearingRange(
+        ndim_state=5, mapping=(0, 2), noise_covar=np.diag([R[1, 1], R[0, 0]]),  # [bearing, range]
+        translation_offset=StateVector([s.position[0], s.position[1]]),
+    )
+    predictor = ParticlePredictor(ConstantTurn(
+        linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2))
+    updater = ParticleUpdater(meas, resampler=SystematicResampler())
+    t0 = datetime.datetime(2025, 1, 1)
+    sd0 = np.sqrt(np.asarray(cfg.P0_diag))[:, None]
+    particles = x0_hat[:, None] + sd0 * np.random.standard_normal((len(x0_hat), N))
+    state: list[Any] = [ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)),
+                                      timestamp=t0)]
+
+    def step(k: int) -> Any:
+        t = t0 + datetime.timedelta(seconds=k * cfg.Ts)
+        pred = predictor.predict(state[0], timestamp=t)
+        zk = StateVector([z[k - 1, 1], z[k - 1, 0]])  # [bearing, range]
+        det = Detection(zk, timestamp=t, measurement_model=meas)
+        state[0] = updater.update(SingleHypothesis(pred, det))
+        return state[0].mean, state[0].covar
+
+    return step
+
+
+def _one_pass(cfg: Config, steps: int, seed: int, times: dict[str, list[float]],
+              with_stonesoup: bool) -> bool:
+    """Run every filter over ``steps`` steps of one run, appending each step's seconds to ``times``.
+
+    Returns whether Stone Soup took part.
+    """
+    model = motion_model(cfg)
+    sim = simulate(cfg, 0)
+    sid = cfg.sources[0].id
+    s_p, s_s = sensor(cfg, PRIMARY), sensor(cfg, sid)
+    R_p, R_s = s_p.R(intensity(cfg, PRIMARY)), s_s.R(intensity(cfg, sid))
+    x0 = sim.x0_hat[:, None]
+    P0 = np.diag(cfg.P0_diag)
+
+    def pf(purpose: str) -> ParticleFilter:
+        return ParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
+
+    source = Source(pf("source-pf"), s_s, R_s)
+    tl = Primary(pf("tl-pf"))
+    iso = Primary(pf("pf"))
+    base = NumpyBaseline(model, sim.x0_hat, P0, cfg.particles, stream(seed, 0, "numpy-baseline"))
+    ss = _stonesoup_stepper(cfg, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed) if (
+        with_stonesoup) else None
+    names = [n for n in NAMES if n != "stonesoup" or ss is not None]
+
+    def run(name: str, k: int, z_p: Observation, z_s: Observation,
+            transfer: Observation | None) -> Observation | None:
+        if name == "source-pf":
+            return source.step(z_s)[1]
+        if name == "tl-pf":
+            tl.step(z_p, [transfer] if transfer is not None else [])
+        elif name == "pf":
+            iso.step(z_p)
+        elif name == "numpy-baseline":
+            stmts = [(sim.z[PRIMARY][k - 1], R_p, s_p.position)]
+            if transfer is not None:
+                stmts.append((transfer.mean[:, 0], transfer.cov[0], s_s.position))
+            base.step(stmts)
+        elif ss is not None:
+            ss(k)
+        return None
+
+    transfer: Observation | None = None
+    clock = time.perf_counter
+    order = np.random.default_rng(seed)
+    for k in range(1, steps + 1):
+        z_p = Observation.broadcast(s_p, sim.z[PRIMARY][k - 1], R_p)
+        z_s = Observation.broadcast(s_s, sim.z[sid][k - 1], R_s)
+        upcoming = None
+        # a fresh order every step: no filter always runs right after the same one (whose memory
+        # traffic it would inherit). The transfer for k + 1 waits until k + 1: any order works.
+        for i in order.permutation(len(names)):
+            name = names[i]
+            t0 = clock()
+            got = run(name, k, z_p, z_s, transfer)
+            dt = clock() - t0
+            upcoming = got if name == "source-pf" else upcoming
+            if transfer is not None or name not in ("tl-pf", "numpy-baseline"):
+                times[name].append(dt)  # k = 1 has no transfer yet: not a TL step
+        transfer = upcoming
+    return ss is not None
+
+
+def run_bench(particles: int = 6000, steps: int | None = None, repeats: int = 3, seed: int = 0,
+              cfg: Config | None = None, stonesoup: bool = True) -> dict[str, Any]:
+    """Median ms per step of each filter and the speedups of ``tl-pf`` over the yardsticks.
+
+    ``cfg`` defaults to Scenario 2 with the paper preset; ``steps`` to its K. Returns
+    ``{"ms_per_step": {name: ms or None},
+    "speedup": {"numpy-baseline": x, "stonesoup": x or None}}``.
+    """
+    cfg = (cfg or make_config()).with_(particles=particles)
+    K = min(steps or cfg.K, cfg.K)
+    if K < 2:
+        raise ValueError("the bench needs at least 2 steps (the first has no transfer)")
+    times: dict[str, list[float]] = {name: [] for name in NAMES}
+    _one_pass(cfg.with_(particles=min(particles, 500)), 3, seed, {n: [] for n in NAMES},
+              stonesoup)  # warm-up: numba's cached kernels load, NumPy's paths warm
+    had_stonesoup = False
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for rep in range(repeats):
+            had_stonesoup = _one_pass(cfg, K, seed + rep, times, stonesoup)
+            gc.collect()
+    finally:
+        if enabled:
+            gc.enable()
+    ms: dict[str, float | None] = {
+        n: float(np.median(times[n]) * 1e3) if times[n] else None for n in NAMES
+    }
+    if not had_stonesoup:
+        ms["stonesoup"] = None
+    tl = ms["tl-pf"]
+    assert tl is not None
+
+    def ratio(name: str) -> float | None:
+        v = ms[name]
+        return None if v is None else v / tl
+
+    return {"ms_per_step": ms, "speedup": {"numpy-baseline": ratio("numpy-baseline"),
+                                          "stonesoup": ratio("stonesoup")}}
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """The bench result as a small text table."""
+    lines = [f"{'filter':<16}{'ms/step':>10}"]
+    for name, v in result["ms_per_step"].items():
+        lines.append(f"{name:<16}{'n/a' if v is None else f'{v:.3f}':>10}")
+    for name, v in result["speedup"].items():
+        lines.append(f"tl-pf speedup vs {name}: {'n/a' if v is None else f'{v:.1f}x'}")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # python -m tltrack.bench
+    print(format_table(run_bench()))
