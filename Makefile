@@ -32,7 +32,9 @@ lint: $(STAMP)
 
 ## Benchmarks (not tests): filter step times and speedups.
 bench: $(STAMP)
+	$(BIN)/pip install --quiet -e '.[dev,bench]'
 	$(BIN)/tltrack bench --json out/bench.json
+	$(BIN)/tltrack bench-live --json out/bench-live.json
 
 ## The paper's figures and tables; RUNS=10000 is the paper's precision.
 RUNS ?= 500

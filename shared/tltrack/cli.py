@@ -354,3 +354,23 @@ def bench_live(
     if json_out:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(text)
+
+
+@app.command()
+def bench(
+    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
+    repeats: Annotated[int, typer.Option(help="passes over the K steps")] = 3,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
+) -> None:
+    """Time one filter step (tl-pf, pf, source-pf) against plain NumPy and Stone Soup, side by side.
+
+    Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `bench` extra)
+    """
+    from tltrack.bench import format_table, run_bench
+
+    result = run_bench(particles=particles, repeats=repeats)
+    console.print(format_table(result))
+    if json_out:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(result, indent=1))
+        console.print(f"wrote {json_out}")
