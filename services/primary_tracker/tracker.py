@@ -18,9 +18,10 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
 from tltrack.filters.base import Estimate
+from tltrack.filters.particle import warm_up
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, warm_up
+from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, wire_covariance
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -34,6 +35,7 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME)
 
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
     gap_timeout_s: float = Field(
@@ -74,7 +76,15 @@ class PrimaryTracker:
         elif info.kind == "episode":
             msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
             if msg is not None:
-                self.episodes.on_message(msg, self.s.recovery)
+                for held in self.episodes.on_message(msg, self.s.recovery):
+                    self.handle(held)
+        elif (
+            info.kind in ("primary_meas", "transfer")
+            and info.episode is not None
+            and (self.episodes.get(info.episode) is None)
+        ):
+            if not self.episodes.hold(info.episode, item):
+                self.svc.count("sample_without_episode")
         elif info.kind == "primary_meas" and info.episode is not None:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
@@ -101,7 +111,9 @@ class PrimaryTracker:
             self.s.filter,
         )
         return Episode(
-            start, PrimaryEpisode(cfg, start.run, self.s.filter), [s.id for s in cfg.sources]
+            start,
+            PrimaryEpisode(cfg, start.run, self.s.filter, self.s.robust),
+            [s.id for s in cfg.sources],
         )
 
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
@@ -197,14 +209,14 @@ class PrimaryTracker:
     ) -> None:
         self.svc.publish(
             keys.primary_estimate(role, e),
-            EstimateMsg(
+            lambda: EstimateMsg(
                 episode=e,
                 sender=keys.PRIMARY,
                 k=k,
                 t_sensor=t_sensor,
                 filter=name,
                 x=est.mean[0],
-                P=est.cov[0],
+                P=wire_covariance(est.cov[0]),
                 transfer_used=used,
                 t_sent=time.time(),
                 step_ms=step_ms,
@@ -215,7 +227,8 @@ class PrimaryTracker:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    warm_up(settings.filter)
+    if settings.filter == "pf":
+        warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)
         liveliness = svc.subscribe(

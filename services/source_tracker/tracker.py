@@ -11,9 +11,10 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
+from tltrack.filters.particle import warm_up
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, SourceEpisode, StepQueue, warm_up
+from tltrack.tracking import Episodes, SourceEpisode, StepQueue, wire_covariance
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("source_tracker")
@@ -53,8 +54,13 @@ class SourceTracker:
         if info.kind == "episode":
             msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
             if msg is not None:
-                self.episodes.on_message(msg, self.s.recovery)
+                for held in self.episodes.on_message(msg, self.s.recovery):
+                    self.handle(held)
         elif info.kind == "source_meas" and info.episode is not None:
+            if self.episodes.get(info.episode) is None:
+                if not self.episodes.hold(info.episode, item):
+                    self.svc.count("measurement_without_episode")
+                return
             msg = decode_received(item, Measurement, self.svc.rejects)
             if msg is not None:
                 self._on_measurement(info.episode, item.key, msg)
@@ -70,7 +76,6 @@ class SourceTracker:
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
         if ep is None:
-            self.svc.count("measurement_without_episode")
             return
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":
@@ -96,26 +101,26 @@ class SourceTracker:
         if k < ep.start.K:
             self.svc.publish(
                 keys.transfer(sid, e),
-                Transfer(
+                lambda: Transfer(
                     episode=e,
                     sender=sid,
                     k=k,
                     t_sensor=t_sensor,
                     k_apply=k + 1,
                     eta=eta.mean[:, 0],
-                    P_eta=eta.cov[0],
+                    P_eta=wire_covariance(eta.cov[0]),
                 ),
             )
         self.svc.publish(
             keys.source_estimate(sid, e),
-            EstimateMsg(
+            lambda: EstimateMsg(
                 episode=e,
                 sender=sid,
                 k=k,
                 t_sensor=t_sensor,
                 filter=ep.tracker.name,
                 x=est.mean[0],
-                P=est.cov[0],
+                P=wire_covariance(est.cov[0]),
                 transfer_used=False,
                 t_sent=time.time(),
                 step_ms=step_ms,
@@ -127,7 +132,8 @@ class SourceTracker:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    warm_up(settings.filter)
+    if settings.filter == "pf":
+        warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))
         svc.announce()

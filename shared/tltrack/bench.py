@@ -48,8 +48,9 @@ NAMES = ("tl-pf", "pf", "source-pf", "numpy-baseline", "stonesoup")
 class NumpyBaseline:
     """The plain NumPy SIR of NOTES.md, one run, (n_x, N) layout: the yardstick, not to be tuned."""
 
-    def __init__(self, model: MotionModel, x0_hat: Array, P0: Array, N: int,
-                 rng: np.random.Generator) -> None:
+    def __init__(
+        self, model: MotionModel, x0_hat: Array, P0: Array, N: int, rng: np.random.Generator
+    ) -> None:
         self.model, self.N, self.rng = model, N, rng
         self.x = x0_hat[:, None] + np.linalg.cholesky(P0) @ rng.standard_normal((len(x0_hat), N))
 
@@ -75,8 +76,9 @@ class NumpyBaseline:
         return mean, d @ d.T / self.N + self.model.Q
 
 
-def _stonesoup_stepper(cfg: Config, z: Array, x0_hat: Array, N: int,
-                       seed: int) -> Callable[[int], Any] | None:
+def _stonesoup_stepper(
+    cfg: Config, z: Array, x0_hat: Array, N: int, seed: int
+) -> Callable[[int], Any] | None:
     """One Stone Soup PF step per call ``step(k)`` on the primary's z_k; None without Stone Soup."""
     try:
         from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
@@ -96,17 +98,21 @@ def _stonesoup_stepper(cfg: Config, z: Array, x0_hat: Array, N: int,
     s = sensor(cfg, PRIMARY)
     R = s.R(intensity(cfg, PRIMARY))
     meas = CartesianToBearingRange(
-        ndim_state=5, mapping=(0, 2), noise_covar=np.diag([R[1, 1], R[0, 0]]),  # [bearing, range]
+        ndim_state=5,
+        mapping=(0, 2),
+        noise_covar=np.diag([R[1, 1], R[0, 0]]),  # [bearing, range]
         translation_offset=StateVector([s.position[0], s.position[1]]),
     )
-    predictor = ParticlePredictor(ConstantTurn(
-        linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2))
+    predictor = ParticlePredictor(
+        ConstantTurn(linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2)
+    )
     updater = ParticleUpdater(meas, resampler=SystematicResampler())
     t0 = datetime.datetime(2025, 1, 1)
     sd0 = np.sqrt(np.asarray(cfg.P0_diag))[:, None]
     particles = x0_hat[:, None] + sd0 * np.random.standard_normal((len(x0_hat), N))
-    state: list[Any] = [ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)),
-                                      timestamp=t0)]
+    state: list[Any] = [
+        ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)), timestamp=t0)
+    ]
 
     def step(k: int) -> Any:
         t = t0 + datetime.timedelta(seconds=k * cfg.Ts)
@@ -119,8 +125,9 @@ def _stonesoup_stepper(cfg: Config, z: Array, x0_hat: Array, N: int,
     return step
 
 
-def _one_pass(cfg: Config, steps: int, seed: int, times: dict[str, list[float]],
-              with_stonesoup: bool) -> bool:
+def _one_pass(
+    cfg: Config, steps: int, seed: int, times: dict[str, list[float]], with_stonesoup: bool
+) -> bool:
     """Run every filter over ``steps`` steps of one run, appending each step's seconds to ``times``.
 
     Returns whether Stone Soup took part.
@@ -140,12 +147,16 @@ def _one_pass(cfg: Config, steps: int, seed: int, times: dict[str, list[float]],
     tl = Primary(pf("tl-pf"))
     iso = Primary(pf("pf"))
     base = NumpyBaseline(model, sim.x0_hat, P0, cfg.particles, stream(seed, 0, "numpy-baseline"))
-    ss = _stonesoup_stepper(cfg, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed) if (
-        with_stonesoup) else None
+    ss = (
+        _stonesoup_stepper(cfg, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed)
+        if (with_stonesoup)
+        else None
+    )
     names = [n for n in NAMES if n != "stonesoup" or ss is not None]
 
-    def run(name: str, k: int, z_p: Observation, z_s: Observation,
-            transfer: Observation | None) -> Observation | None:
+    def run(
+        name: str, k: int, z_p: Observation, z_s: Observation, transfer: Observation | None
+    ) -> Observation | None:
         if name == "source-pf":
             return source.step(z_s)[1]
         if name == "tl-pf":
@@ -182,8 +193,14 @@ def _one_pass(cfg: Config, steps: int, seed: int, times: dict[str, list[float]],
     return ss is not None
 
 
-def run_bench(particles: int = 6000, steps: int | None = None, repeats: int = 3, seed: int = 0,
-              cfg: Config | None = None, stonesoup: bool = True) -> dict[str, Any]:
+def run_bench(
+    particles: int = 6000,
+    steps: int | None = None,
+    repeats: int = 3,
+    seed: int = 0,
+    cfg: Config | None = None,
+    stonesoup: bool = True,
+) -> dict[str, Any]:
     """Median ms per step of each filter and the speedups of ``tl-pf`` over the yardsticks.
 
     ``cfg`` defaults to Scenario 2 with the paper preset; ``steps`` to its K. Returns
@@ -195,8 +212,9 @@ def run_bench(particles: int = 6000, steps: int | None = None, repeats: int = 3,
     if K < 2:
         raise ValueError("the bench needs at least 2 steps (the first has no transfer)")
     times: dict[str, list[float]] = {name: [] for name in NAMES}
-    _one_pass(cfg.with_(particles=min(particles, 500)), 3, seed, {n: [] for n in NAMES},
-              stonesoup)  # warm-up: numba's cached kernels load, NumPy's paths warm
+    _one_pass(
+        cfg.with_(particles=min(particles, 500)), 3, seed, {n: [] for n in NAMES}, stonesoup
+    )  # warm-up: numba's cached kernels load, NumPy's paths warm
     had_stonesoup = False
     enabled = gc.isenabled()
     gc.disable()
@@ -219,8 +237,10 @@ def run_bench(particles: int = 6000, steps: int | None = None, repeats: int = 3,
         v = ms[name]
         return None if v is None else v / tl
 
-    return {"ms_per_step": ms, "speedup": {"numpy-baseline": ratio("numpy-baseline"),
-                                          "stonesoup": ratio("stonesoup")}}
+    return {
+        "ms_per_step": ms,
+        "speedup": {"numpy-baseline": ratio("numpy-baseline"), "stonesoup": ratio("stonesoup")},
+    }
 
 
 def format_table(result: dict[str, Any]) -> str:

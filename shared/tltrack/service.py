@@ -16,7 +16,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any, TypeVar
 
@@ -100,11 +100,18 @@ class Service:
         """Declare the liveliness token; call it once every subscription is in place."""
         self._token = declare_token(self.session, keys.alive(self.operator, self.name))
 
-    def publish(self, key: str, msg: Message) -> None:
-        pub = self._pubs.get(key)
-        if pub is None:
-            pub = self._pubs[key] = Publisher(self.session, key)
-        pub.put(msg)
+    def publish(self, key: str, msg: Message | Callable[[], Message]) -> None:
+        """Publish ``msg`` (or what ``msg()`` builds); a message that cannot be built or sent is
+        counted and logged: one bad estimate must not take the service down."""
+        try:
+            message = msg() if callable(msg) else msg
+            pub = self._pubs.get(key)
+            if pub is None:
+                pub = self._pubs[key] = Publisher(self.session, key)
+            pub.put(message)
+        except (ValidationError, ValueError, zenoh.ZError) as err:
+            self.count("publish_failed")
+            log.error("%s: could not publish on %s: %s", self.name, key, err)
 
     def key_info(self, item: Received) -> keys.KeyInfo | None:
         """What the sample's key names; a key outside the layout is counted as rejected."""

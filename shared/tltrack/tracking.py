@@ -10,7 +10,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from tltrack.config import Config
 from tltrack.engine.registry import build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
 from tltrack.filters.base import Estimate, Filter
+from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Message, Transfer
 from tltrack.models.motion import motion_model
@@ -42,6 +43,19 @@ def transfer(cfg: Config, msg: Transfer, source_id: str) -> Observation:
     return Observation.broadcast(sensor(cfg, source_id), np.asarray(msg.eta), np.asarray(msg.P_eta))
 
 
+def wire_covariance(P: np.ndarray) -> np.ndarray:
+    """P made fit for a message: symmetric, eigenvalues at least 1e-9 max(1, trace P).
+
+    The paper's particle covariance (sample covariance + Q_v) of a cloud collapsed onto one
+    particle is the singular Q_v; a receiver rightly refuses that as not positive-definite.
+    """
+    P = 0.5 * (P + P.T)
+    w, V = np.linalg.eigh(P)
+    floor = 1e-9 * max(1.0, float(np.trace(P)))
+    P = (V * np.maximum(w, floor)) @ V.T
+    return 0.5 * (P + P.T)
+
+
 class SourceEpisode:
     """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1)."""
 
@@ -58,12 +72,19 @@ class SourceEpisode:
 
 
 class PrimaryEpisode:
-    """Algorithm 2 for one episode, with an isolated twin run alongside for comparison."""
+    """Algorithm 2 for one episode, with an isolated twin run alongside for comparison.
 
-    def __init__(self, cfg: Config, run: int, kind: str) -> None:
+    ``robust`` makes it ``robust-tl-<kind>``: transfers are first judged for consistency (and the
+    config's budget), exactly as the engine's filter of that name.
+    """
+
+    def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
-        self.tl_name, self.iso_name = f"tl-{kind}", kind
-        self.tl = Primary(_filter(cfg, self.tl_name, run), None, recovery(parse(self.tl_name), cfg))
+        self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
+        policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget) if robust else None
+        self.tl = Primary(
+            _filter(cfg, self.tl_name, run), policy, recovery(parse(self.tl_name), cfg)
+        )
         self.iso = Primary(
             _filter(cfg, self.iso_name, run), None, recovery(parse(self.iso_name), cfg)
         )
@@ -134,65 +155,58 @@ class StepQueue(Generic[T]):
         return list(range(first, self.next_k))
 
 
-def warm_up(kind: str) -> None:
-    """Run one tiny episode so compiled kernels are ready before the first real measurement."""
-    from tltrack.config import make_config
-    from tltrack.engine.scenario import simulate
-
-    cfg = make_config(particles=10, K=2)
-    run = simulate(cfg, 0)
-    sid = cfg.source.id
-    src, prim = SourceEpisode(cfg, 0, kind, sid), PrimaryEpisode(cfg, 0, kind)
-    for k in (1, 2):
-        z = {
-            i: Measurement(
-                episode="warmup", sender="warmup", k=k, t_sensor=0.0, sensor=i, z=run.z[i][k - 1]
-            )
-            for i in (PRIMARY, sid)
-        }
-        _, eta = src.step(z[sid])
-        t = Transfer(
-            episode="warmup",
-            sender=sid,
-            k=k,
-            t_sensor=0.0,
-            k_apply=k + 1,
-            eta=eta.mean[:, 0],
-            P_eta=eta.cov[0],
-        )
-        prim.step(z[PRIMARY], {sid: t})
-
-
 class Episodes(Generic[T]):
     """The episodes a tracker follows, each with its state ``T``.
 
     An :class:`EpisodeStart` opens one (through ``open``, which may decline with None); an
     :class:`EpisodeEnd` marks its last step, and :meth:`retire` forgets it once that step is taken.
     At most ``capacity`` are kept; the oldest goes first, so a flood of episodes is bounded.
+
+    Zenoh keeps order per key, not across keys, so a measurement can overtake its episode's start:
+    :meth:`hold` keeps a few such samples, and :meth:`on_message` hands them back once it opens.
     """
+
+    HELD_EPISODES = 4
+    HELD_PER_EPISODE = 64
 
     def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], T | None]) -> None:
         self.capacity = capacity
         self._open = open
         self._state: dict[str, T] = {}
         self._last_k: dict[str, int] = {}
+        self._held: dict[str, list[Any]] = {}
 
-    def on_message(self, msg: Message, recovery: bool) -> None:
-        """Open or end an episode; ``recovery`` is the tracker's own setting, not the episode's."""
+    def hold(self, e: str, item: Any) -> bool:
+        """Keep a sample of a not-yet-opened episode; False when the bounded store is full."""
+        if e not in self._held:
+            if len(self._held) >= self.HELD_EPISODES:
+                self._held.pop(next(iter(self._held)))
+            self._held[e] = []
+        if len(self._held[e]) >= self.HELD_PER_EPISODE:
+            return False
+        self._held[e].append(item)
+        return True
+
+    def on_message(self, msg: Message, recovery: bool) -> list[Any]:
+        """Open or end an episode; returns the samples held for an episode it opens.
+
+        ``recovery`` is the tracker's own setting, not the episode's.
+        """
         if isinstance(msg, EpisodeEnd):
             if msg.episode in self._state:
                 self._last_k[msg.episode] = msg.steps_sent
-            return
+            return []
         if not isinstance(msg, EpisodeStart) or msg.episode in self._state:
-            return
+            return []
         state = self._open(msg, msg.parsed_config().with_(recovery=recovery))
         if state is None:
-            return
+            return []
         while len(self._state) >= self.capacity:
             oldest = next(iter(self._state))
             self._state.pop(oldest)
             self._last_k.pop(oldest, None)
         self._state[msg.episode] = state
+        return self._held.pop(msg.episode, [])
 
     def get(self, e: str) -> T | None:
         return self._state.get(e)

@@ -27,6 +27,7 @@ from tltrack.engine.registry import FilterSpec, build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, Run, intensity, sensor, simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy
+from tltrack.filters.particle import warm_up
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models.motion import POS, motion_model
 from tltrack.models.observation import Observation
@@ -75,6 +76,14 @@ def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
     return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
 
 
+def nees(d: Array, P: Array) -> Array:
+    """d' P^-1 d per run; a pseudo-inverse where P is singular (a collapsed cloud's is Q_v)."""
+    try:
+        return np.einsum("bi,bi->b", d, np.linalg.solve(P, d[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:
+        return np.einsum("bi,bij,bj->b", d, np.linalg.pinv(P, rcond=1e-10, hermitian=True), d)
+
+
 class _Score:
     """Accumulates one filter's errors against the truth of a batch."""
 
@@ -87,9 +96,7 @@ class _Score:
         d = est.mean - truth_k  # (B, n)
         e2 = d[:, POS[0]] ** 2 + d[:, POS[1]] ** 2
         self.stats.sq_err[k - 1] += e2.sum()
-        # pinv: a collapsed particle cloud's covariance is the singular Q_v
-        nees = np.einsum("bi,bij,bj->b", d, np.linalg.pinv(est.cov, rcond=1e-10, hermitian=True), d)
-        self.stats.nees[k - 1] += nees.sum()
+        self.stats.nees[k - 1] += nees(d, est.cov).sum()
         self._sq.append(e2)
         if self._means is not None:
             self._means.append(est.mean)
@@ -254,6 +261,7 @@ def run_experiment(
         if progress:
             progress(n)
 
+    warm_up()  # workers then load compiled kernels from the cache instead of compiling them
     if workers == 1:
         for b in batches:
             absorb(run_batch(cfg, names, b), len(b))

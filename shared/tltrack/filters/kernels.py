@@ -171,25 +171,35 @@ def exp(x: float) -> float:
     r = (x - k * _LN2_HI) - k * _LN2_LO  # |r| <= ln(2)/2
     p = 1.0 + r * (
         1.0
-        + r * (
+        + r
+        * (
             1.0 / 2
-            + r * (
+            + r
+            * (
                 1.0 / 6
-                + r * (
+                + r
+                * (
                     1.0 / 24
-                    + r * (
+                    + r
+                    * (
                         1.0 / 120
-                        + r * (
+                        + r
+                        * (
                             1.0 / 720
-                            + r * (
+                            + r
+                            * (
                                 1.0 / 5040
-                                + r * (
+                                + r
+                                * (
                                     1.0 / 40320
-                                    + r * (
+                                    + r
+                                    * (
                                         1.0 / 362880
-                                        + r * (
+                                        + r
+                                        * (
                                             1.0 / 3628800
-                                            + r * (
+                                            + r
+                                            * (
                                                 1.0 / 39916800
                                                 + r * (1.0 / 479001600 + r * (1.0 / 6227020800))
                                             )
@@ -301,7 +311,7 @@ def _bm_row(u: np.ndarray, e: np.ndarray) -> None:
     e[j] and e[M + j]."""
     n = e.shape[0]
     M = (n + 1) // 2
-    _box_muller(u[: n - M], u[M : n], e[: n - M], e[M:n])
+    _box_muller(u[: n - M], u[M:n], e[: n - M], e[M:n])
     if n - M < M:  # n odd: the last pair gives one Gaussian
         e[M - 1] = math.sqrt(-2.0 * log(1.0 - u[M - 1])) * sincos_2pi(u[2 * M - 1])[1]
 
@@ -330,7 +340,13 @@ def gaussians(U: np.ndarray, E: np.ndarray) -> None:
 
 @njit(**_FMA)
 def _ct_fixup(
-    x: np.ndarray, anc: np.ndarray, e: np.ndarray, b: int, T: float, small: float, L: np.ndarray,
+    x: np.ndarray,
+    anc: np.ndarray,
+    e: np.ndarray,
+    b: int,
+    T: float,
+    small: float,
+    L: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """Redo, with libm's sin/cos, the particles whose turn argument the fast reduction refused."""
@@ -374,8 +390,17 @@ def _gather_block(x: np.ndarray, anc: np.ndarray, b: int, i0: int, m: int, g: np
 
 @njit(**_FMA)
 def _ct_block(
-    ur: np.ndarray, ua: np.ndarray, e2: np.ndarray, g: np.ndarray, T: float, small: float,
-    L: np.ndarray, o0: np.ndarray, o1: np.ndarray, o2: np.ndarray, o3: np.ndarray,
+    ur: np.ndarray,
+    ua: np.ndarray,
+    e2: np.ndarray,
+    g: np.ndarray,
+    T: float,
+    small: float,
+    L: np.ndarray,
+    o0: np.ndarray,
+    o1: np.ndarray,
+    o2: np.ndarray,
+    o3: np.ndarray,
     o4: np.ndarray,
 ) -> int:
     """Propagate the gathered particles g[:, :m] into the rows o0..o4 (m,), m = len(ur), with the
@@ -417,8 +442,16 @@ def _ct_block(
 
 @njit(**_FMA)
 def ct_predict(
-    x: np.ndarray, anc: np.ndarray, U: np.ndarray, e: np.ndarray, g: np.ndarray, T: float,
-    small: float, L: np.ndarray, out: np.ndarray, b0: int,
+    x: np.ndarray,
+    anc: np.ndarray,
+    U: np.ndarray,
+    e: np.ndarray,
+    g: np.ndarray,
+    T: float,
+    small: float,
+    L: np.ndarray,
+    out: np.ndarray,
+    b0: int,
 ) -> None:
     """out[:, b, i] = f_CT(x[:, b, anc[b, i]]) + L @ eps: the resampling's gather fused into the
     propagation, block by block through the scratch g (5, BLOCK), for the runs b0 ..
@@ -435,17 +468,35 @@ def ct_predict(
             m = min(BLOCK, N - i0)
             _gather_block(x, anc, b, i0, m, g)
             j = i0 + m
-            big += _ct_block(u[i0:j], u[N + i0 : N + j], e2[i0:j], g, T, small, L,
-                             out[0, b, i0:j], out[1, b, i0:j], out[2, b, i0:j], out[3, b, i0:j],
-                             out[4, b, i0:j])
+            big += _ct_block(
+                u[i0:j],
+                u[N + i0 : N + j],
+                e2[i0:j],
+                g,
+                T,
+                small,
+                L,
+                out[0, b, i0:j],
+                out[1, b, i0:j],
+                out[2, b, i0:j],
+                out[3, b, i0:j],
+                out[4, b, i0:j],
+            )
         if big:  # turn arguments beyond the fast sin/cos (huge or not finite): redo with libm
             _gaussian_rows(u, e)
             _ct_fixup(x, anc, e, b, T, small, L, out)
 
 
 @njit(**_FMA)
-def _cv_row(A: np.ndarray, L: np.ndarray, k: int, g: np.ndarray, e0: np.ndarray, e1: np.ndarray,
-            o: np.ndarray) -> None:
+def _cv_row(
+    A: np.ndarray,
+    L: np.ndarray,
+    k: int,
+    g: np.ndarray,
+    e0: np.ndarray,
+    e1: np.ndarray,
+    o: np.ndarray,
+) -> None:
     """o = row k of A g + L eps for a block (1-D, unit-stride indexing, as in :func:`_ct_block`)."""
     a0, a1, a2, a3 = A[k, 0], A[k, 1], A[k, 2], A[k, 3]
     l0, l1 = L[k, 0], L[k, 1]
@@ -456,8 +507,17 @@ def _cv_row(A: np.ndarray, L: np.ndarray, k: int, g: np.ndarray, e0: np.ndarray,
 
 
 @njit(**_FMA)
-def cv_predict(x: np.ndarray, anc: np.ndarray, U: np.ndarray, e: np.ndarray, g: np.ndarray,
-               A: np.ndarray, L: np.ndarray, out: np.ndarray, b0: int) -> None:
+def cv_predict(
+    x: np.ndarray,
+    anc: np.ndarray,
+    U: np.ndarray,
+    e: np.ndarray,
+    g: np.ndarray,
+    A: np.ndarray,
+    L: np.ndarray,
+    out: np.ndarray,
+    b0: int,
+) -> None:
     """out[:, b, i] = A x[:, b, anc[b, i]] + L @ eps for the 4-state constant-velocity model, for
     the runs b0 .. b0 + len(U) - 1; L is Q_sqrt (4, 2); e (2, N) and g (4, BLOCK) scratch."""
     N = out.shape[2]
@@ -490,8 +550,9 @@ _TWO_PI = 6.28318530717958647693e00
 
 
 @njit(**_FMA)
-def _rb_constants(pos: np.ndarray, mean: np.ndarray, cov: np.ndarray, j: int, b: int,
-                  c: np.ndarray) -> None:
+def _rb_constants(
+    pos: np.ndarray, mean: np.ndarray, cov: np.ndarray, j: int, b: int, c: np.ndarray
+) -> None:
     """c = [sx, sy, z_r, cos z_b, sin z_b, -P00/2, -P01, -P11/2, z_b in [-pi, pi]], P = cov^-1."""
     c00, c01, c10, c11 = cov[j, b, 0, 0], cov[j, b, 0, 1], cov[j, b, 1, 0], cov[j, b, 1, 1]
     det = c00 * c11 - c01 * c10
@@ -521,8 +582,9 @@ def _rb_pass(xr: np.ndarray, yr: np.ndarray, c: np.ndarray, row: np.ndarray, add
 
 
 @njit(**_FMA)
-def _rb_pass2(xr: np.ndarray, yr: np.ndarray, c: np.ndarray, c2: np.ndarray, row: np.ndarray,
-              add: bool) -> None:
+def _rb_pass2(
+    xr: np.ndarray, yr: np.ndarray, c: np.ndarray, c2: np.ndarray, row: np.ndarray, add: bool
+) -> None:
     """Two statements about sensors at the same place (the primary's z and a co-located source's
     transfer): one range and one bearing per particle serve both."""
     sx, sy, zr, zb, pa, pb, pc = c[0], c[1], c[2], c[8], c[5], c[6], c[7]
@@ -547,8 +609,18 @@ def _rb_pass2(xr: np.ndarray, yr: np.ndarray, c: np.ndarray, c2: np.ndarray, row
 
 
 @njit(**_FMA)
-def _rb_loglik_run(x: np.ndarray, ix: int, iy: int, b: int, pos: np.ndarray, mean: np.ndarray,
-                   cov: np.ndarray, mask: np.ndarray, cs: np.ndarray, row: np.ndarray) -> None:
+def _rb_loglik_run(
+    x: np.ndarray,
+    ix: int,
+    iy: int,
+    b: int,
+    pos: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    mask: np.ndarray,
+    cs: np.ndarray,
+    row: np.ndarray,
+) -> None:
     """Run b of :func:`rb_loglik`, into row (N,); cs (M, _NC) is scratch."""
     na = 0
     for j in range(pos.shape[0]):
@@ -571,8 +643,16 @@ def _rb_loglik_run(x: np.ndarray, ix: int, iy: int, b: int, pos: np.ndarray, mea
 
 
 @njit(**_FMA)
-def rb_loglik(x: np.ndarray, ix: int, iy: int, pos: np.ndarray, mean: np.ndarray,
-              cov: np.ndarray, mask: np.ndarray, logw: np.ndarray) -> None:
+def rb_loglik(
+    x: np.ndarray,
+    ix: int,
+    iy: int,
+    pos: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    mask: np.ndarray,
+    logw: np.ndarray,
+) -> None:
     """Write into logw (B, N) the sum of M range-bearing log-likelihoods (up to constants),
     log N(mean[j, :, b]; h_j(x), cov[j, b]) for a sensor at pos[j]; obs j counts for run b only
     where mask[j, b]. Particle positions are x[ix], x[iy]."""
@@ -583,9 +663,19 @@ def rb_loglik(x: np.ndarray, ix: int, iy: int, pos: np.ndarray, mean: np.ndarray
 
 @njit(**_FMA)
 def rb_update(
-    x: np.ndarray, ix: int, iy: int, pos: np.ndarray, mean: np.ndarray, cov: np.ndarray,
-    mask: np.ndarray, u: np.ndarray, anc: np.ndarray, m_out: np.ndarray, c_out: np.ndarray,
-    ok: np.ndarray, row: np.ndarray,
+    x: np.ndarray,
+    ix: int,
+    iy: int,
+    pos: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    mask: np.ndarray,
+    u: np.ndarray,
+    anc: np.ndarray,
+    m_out: np.ndarray,
+    c_out: np.ndarray,
+    ok: np.ndarray,
+    row: np.ndarray,
 ) -> int:
     """:func:`rb_loglik` then :func:`resample`, run by run, so that a run's log-weights (row, (N,)
     scratch) stay in cache between the two. Same arguments and results as those two."""
@@ -688,8 +778,9 @@ def moments(x: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> None:
 
 
 @njit(**_SUM)
-def _weighted_moments_run(x: np.ndarray, b: int, cnt: np.ndarray, mean: np.ndarray,
-                          cov: np.ndarray) -> None:
+def _weighted_moments_run(
+    x: np.ndarray, b: int, cnt: np.ndarray, mean: np.ndarray, cov: np.ndarray
+) -> None:
     """Mean and covariance (normalised by sum(cnt) = N) of the cloud where particle j of run b
     appears cnt[j] times: the resampled cloud's moments without gathering it."""
     n, _, N = x.shape
@@ -735,8 +826,9 @@ def _max(v: np.ndarray) -> float:
 
 
 @njit(**_SUM)
-def _weighted_moments5(x: np.ndarray, b: int, cnt: np.ndarray, mean: np.ndarray,
-                       cov: np.ndarray) -> None:
+def _weighted_moments5(
+    x: np.ndarray, b: int, cnt: np.ndarray, mean: np.ndarray, cov: np.ndarray
+) -> None:
     """:func:`_weighted_moments_run` for n = 5, each pass a single loop."""
     N = x.shape[2]
     s0 = s1 = s2 = s3 = s4 = 0.0
@@ -797,8 +889,16 @@ def _weighted_moments5(x: np.ndarray, b: int, cnt: np.ndarray, mean: np.ndarray,
 
 
 @njit(**_FMA)
-def _resample_run(w: np.ndarray, u: float, x: np.ndarray, b: int, anc: np.ndarray,
-                  cnt: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> bool:
+def _resample_run(
+    w: np.ndarray,
+    u: float,
+    x: np.ndarray,
+    b: int,
+    anc: np.ndarray,
+    cnt: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+) -> bool:
     """Run b of :func:`resample`, from its log-weights w (overwritten); cnt (N,) is scratch."""
     N = w.shape[0]
     m = _max(w)
@@ -816,8 +916,13 @@ def _resample_run(w: np.ndarray, u: float, x: np.ndarray, b: int, anc: np.ndarra
 
 @njit(**_FMA)
 def resample(
-    logw: np.ndarray, u: np.ndarray, x: np.ndarray, anc: np.ndarray, mean: np.ndarray,
-    cov: np.ndarray, ok: np.ndarray,
+    logw: np.ndarray,
+    u: np.ndarray,
+    x: np.ndarray,
+    anc: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    ok: np.ndarray,
 ) -> int:
     """Normalise exp(logw) per run and resample systematically with offset u[b]: the ancestors go
     to anc (B, N + 1; the last column is scratch), and the resampled cloud's mean (B, n) and

@@ -176,21 +176,24 @@ class ParticleFilter:
             g.random(out=U[0])
             if self._motion == "ct":
                 assert isinstance(m, CoordinatedTurn)
-                kernels.ct_predict(src, anc, U, self._e, self._g, float(m.T), float(m.SMALL),
-                                   self._L, out, b)
+                kernels.ct_predict(
+                    src, anc, U, self._e, self._g, float(m.T), float(m.SMALL), self._L, out, b
+                )
             else:
                 kernels.cv_predict(src, anc, U, self._e, self._g, self._A, self._L, out, b)
         self.x = out
 
-    def _split(self, observations: Sequence[Observation]) -> tuple[
-            tuple[Array, Array, Array, NDArray[np.bool_]] | None, list[Observation]]:
+    def _split(
+        self, observations: Sequence[Observation]
+    ) -> tuple[tuple[Array, Array, Array, NDArray[np.bool_]] | None, list[Observation]]:
         """The range-bearing statements packed for the kernels, and the others (generic path)."""
         fast = self._x.dtype == np.float64 and self._x.flags.c_contiguous
         rb: list[Observation] = []
         others: list[Observation] = []
         for o in observations:
-            (rb if fast and type(o.sensor) is RangeBearing and o.mean.shape[0] == 2
-             else others).append(o)
+            (
+                rb if fast and type(o.sensor) is RangeBearing and o.mean.shape[0] == 2 else others
+            ).append(o)
         if not rb:
             return None, others
         pos, mean, cov, mask = packed = self._packing(len(rb))
@@ -216,8 +219,12 @@ class ParticleFilter:
         """Reused buffers (positions, means, covariances, masks) for M range-bearing statements."""
         if M not in self._packs:
             B = self.batch
-            self._packs[M] = (np.empty((M, 2)), np.empty((M, 2, B)), np.empty((M, B, 2, 2)),
-                              np.empty((M, B), dtype=np.bool_))
+            self._packs[M] = (
+                np.empty((M, 2)),
+                np.empty((M, 2, B)),
+                np.empty((M, B, 2, 2)),
+                np.empty((M, B), dtype=np.bool_),
+            )
         return self._packs[M]
 
     def log_weights(self, observations: Sequence[Observation]) -> Array:
@@ -243,8 +250,9 @@ class ParticleFilter:
         ok = np.empty(B, dtype=np.bool_)
         packed, others = self._split(observations)
         if packed is not None and not others:  # likelihood and resampling fused, run by run
-            good = kernels.rb_update(x, POS[0], POS[1], *packed, u, self._anc, mean, cov, ok,
-                                     self._logw[0])
+            good = kernels.rb_update(
+                x, POS[0], POS[1], *packed, u, self._anc, mean, cov, ok, self._logw[0]
+            )
         else:
             self._loglik_into(observations, self._logw)
             good = kernels.resample(self._logw, u, x, self._anc, mean, cov, ok)
@@ -280,8 +288,9 @@ class ParticleFilter:
             eta = np.empty((2, B))
             cov = np.empty((B, 2, 2))
             sx, sy = sensor.position
-            kernels.rb_predicted_obs(_f64(self._cloud()), POS[0], POS[1], float(sx), float(sy), eta,
-                                     cov)
+            kernels.rb_predicted_obs(
+                _f64(self._cloud()), POS[0], POS[1], float(sx), float(sy), eta, cov
+            )
             return Observation(sensor, eta, cov + R)
         Z = sensor.h(self._cloud())  # (2, B, N)
         eta = sensor.mean(Z, axis=2)  # (2, B)

@@ -6,7 +6,9 @@ is on the primary's own measurement, before the update:
 
     lost  <=>  min_i (z_k - h(x_k^(i)))' Q_w^-1 (z_k - h(x_k^(i)))  >  chi2_2^{-1}(1 - 1e-9) ~ 41.4
 
-(also when the cloud holds a non-finite value). A lost run's particles are redrawn around the
+(also when the cloud holds a non-finite value), or when z_k alone would leave fewer than
+``min_ess`` effective particles: the weights of all but one underflow, as after a long outage
+whose predictions spread the cloud thin. A lost run's particles are redrawn around the
 position that z_k implies (its linearised covariance), keeping the velocity and turn rate of the
 previous mean with the spread of P0. The paper's experiments keep it off, so lost runs count.
 """
@@ -32,6 +34,7 @@ class Recovery:
 
     P0: Array
     tail: float = 1e-9
+    min_ess: float = 2.0
     count: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def lost(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
@@ -42,8 +45,11 @@ class Recovery:
             + 2 * W[:, 0, 1, None] * d[0] * d[1]
             + W[:, 1, 1, None] * d[1] ** 2
         )
-        best = np.min(np.where(np.isfinite(nis), nis, np.inf), axis=1)
-        return ~(best <= chi2.ppf(1.0 - self.tail, 2))
+        nis = np.where(np.isfinite(nis), nis, np.inf)
+        best = np.min(nis, axis=1)
+        w = np.exp(-0.5 * (nis - best[:, None]))
+        ess = w.sum(axis=1) ** 2 / (w**2).sum(axis=1)
+        return ~((best <= chi2.ppf(1.0 - self.tail, 2)) & (ess >= self.min_ess))
 
     def __call__(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
         """Reinitialise the lost runs of ``pf`` around ``z``; returns which were."""
