@@ -15,7 +15,9 @@ class Settings(BaseSettings):
     """Loopback by default: the page shows referee data, so exposing it is an explicit choice
     (``TLTRACK_DASHBOARD_HOST=0.0.0.0`` in a container, behind a published port)."""
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_DASHBOARD_", cli_prog_name=NAME)
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_DASHBOARD_", cli_prog_name=NAME, env_ignore_empty=True
+    )
 
     host: str = Field(DEFAULT_HOST, min_length=1, description="address to serve the page on")
     port: int = Field(DEFAULT_PORT, ge=1, le=65535, description="TCP port of the page")

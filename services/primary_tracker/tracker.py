@@ -32,7 +32,9 @@ SOURCE_TRACKER = "source_tracker"
 class Settings(BaseSettings):
     """Environment ``TLTRACK_PRIMARY_<FIELD>`` or ``--<field>``."""
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME)
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME, env_ignore_empty=True
+    )
 
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")

@@ -32,7 +32,9 @@ NAME = "scorer"
 class Settings(BaseSettings):
     """Environment ``TLTRACK_SCORER_<FIELD>`` or ``--<field>``."""
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_SCORER_", cli_prog_name=NAME)
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_SCORER_", cli_prog_name=NAME, env_ignore_empty=True
+    )
 
     db: Path = Field(Path("tltrack-scorer.sqlite"), description="SQLite file")
     grace_s: float = Field(5.0, gt=0, description="wait for late estimates after an episode")

@@ -34,7 +34,9 @@ NAME = "sensor_sim"
 class Settings(BaseSettings):
     """Environment ``TLTRACK_SIM_<FIELD>`` or ``--<field>``."""
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_SIM_", cli_prog_name=NAME)
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_SIM_", cli_prog_name=NAME, env_ignore_empty=True
+    )
 
     config: Path | None = Field(None, description="TOML/JSON experiment config")
     scenario: Literal["cv", "ct"] | None = None

@@ -24,7 +24,9 @@ NAME = "source_tracker"
 class Settings(BaseSettings):
     """Environment ``TLTRACK_SOURCE_<FIELD>`` or ``--<field>``."""
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_SOURCE_", cli_prog_name=NAME)
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_SOURCE_", cli_prog_name=NAME, env_ignore_empty=True
+    )
 
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
     filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")

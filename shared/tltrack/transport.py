@@ -67,7 +67,9 @@ class ZenohSettings(BaseSettings):
       section (rules, subjects, policies).
     """
 
-    model_config = SettingsConfigDict(env_prefix="TLTRACK_ZENOH_", extra="forbid")
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_ZENOH_", extra="forbid", env_ignore_empty=True
+    )
 
     mode: Literal["client", "peer", "router"] = "client"
     endpoints: Annotated[list[str], NoDecode] = Field(

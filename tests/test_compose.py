@@ -1,0 +1,491 @@
+"""compose.yaml end to end, over real containers: build, `up -d`, five scored episodes, a network
+partition of the source tracker and its healing, and a teardown that leaves nothing behind.
+
+Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
+whichever of `docker compose` and `docker-compose` answers. The image is built with
+scripts/build_image.sh, and reused while neither the sources nor the build files change
+(a stamp in build/ records the image id and a digest of them; TLTRACK_TEST_REBUILD_IMAGE=1 forces
+a build). The stack's logs are kept in pytest's temporary directory; the path is printed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+import secrets
+import shutil
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from tltrack import keys
+from tltrack.transport import ZenohSettings, open_session, query
+
+pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.timeout(900)]
+
+ROOT = Path(__file__).resolve().parents[1]
+COMPOSE_FILE = ROOT / "compose.yaml"
+IMAGE = os.environ.get("TLTRACK_IMAGE", "tltrack:latest")
+STAMP = ROOT / "build" / "test_compose.stamp"
+
+EPISODES = 5
+STEPS = 100
+LEASE_S = 2.0  # TLTRACK_ZENOH_LEASE_MS in compose.yaml
+# The partition episode: long enough to cut the source off, wait out the lease, heal, and see
+# the transfer come back (the source's zenoh client retries its router with a backoff).
+PART_STEPS, PART_PACE = 300, 10.0
+PART_EPISODE = "part-r5"
+
+
+def _run(
+    cmd: list[str], *, timeout: float = 120, env: dict[str, str] | None = None, check: bool = True
+) -> subprocess.CompletedProcess[str]:
+    proc = subprocess.run(
+        cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=timeout, check=False
+    )
+    if check and proc.returncode != 0:
+        raise AssertionError(
+            f"{' '.join(cmd)} exited with {proc.returncode}\n"
+            f"stdout:\n{proc.stdout[-4000:]}\nstderr:\n{proc.stderr[-4000:]}"
+        )
+    return proc
+
+
+def _answers(cmd: list[str]) -> bool:
+    try:
+        return subprocess.run(cmd, capture_output=True, timeout=60, check=False).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+
+
+def compose_tool() -> list[str]:
+    """`docker compose` if the plugin answers, else `docker-compose`; fails if neither does."""
+    if _answers(["docker", "compose", "version"]):
+        return ["docker", "compose"]
+    if shutil.which("docker-compose") and _answers(["docker-compose", "version"]):
+        return ["docker-compose"]
+    pytest.fail("a Docker Engine answers, but neither `docker compose` nor `docker-compose` does")
+
+
+@pytest.fixture(scope="module")
+def compose() -> list[str]:
+    if shutil.which("docker") is None:
+        pytest.skip("docker is not installed: no Docker Engine to run compose.yaml on")
+    if not _answers(["docker", "info"]):
+        pytest.skip("no Docker Engine answers `docker info`: compose.yaml is not exercised")
+    return compose_tool()
+
+
+# ---- the image ---------------------------------------------------------------------------------
+
+
+def _sources_digest() -> str:
+    """What the image is built from: the sources, the dependency pins and the build files."""
+    h = hashlib.sha256()
+    files = [ROOT / "pyproject.toml", ROOT / "Dockerfile", ROOT / ".dockerignore"]
+    files += [ROOT / "scripts" / n for n in ("build_image.sh", "build_base_image.sh")]
+    for top in ("shared", "services"):
+        files += [
+            p for p in (ROOT / top).rglob("*") if p.is_file() and "__pycache__" not in p.parts
+        ]
+    for p in sorted(files):
+        if p.exists():
+            h.update(str(p.relative_to(ROOT)).encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def _image_id() -> str | None:
+    proc = _run(["docker", "image", "inspect", "-f", "{{.Id}}", IMAGE], check=False)
+    return proc.stdout.strip() if proc.returncode == 0 else None
+
+
+@pytest.fixture(scope="module")
+def image(compose: list[str]) -> str:
+    digest = _sources_digest()
+    current = _image_id()
+    stamp = STAMP.read_text().split() if STAMP.exists() else []
+    if (
+        current is not None
+        and stamp == [current, digest]
+        and os.environ.get("TLTRACK_TEST_REBUILD_IMAGE") != "1"
+    ):
+        print(f"reusing {IMAGE} ({current[:19]}): sources unchanged since it was built")
+        return IMAGE
+    t0 = time.monotonic()
+    _run([str(ROOT / "scripts" / "build_image.sh")], timeout=1500)
+    print(f"built {IMAGE} in {time.monotonic() - t0:.0f} s")
+    built = _image_id()
+    assert built is not None, f"scripts/build_image.sh left no {IMAGE}"
+    STAMP.parent.mkdir(parents=True, exist_ok=True)
+    STAMP.write_text(f"{built} {digest}\n")
+    return IMAGE
+
+
+# ---- the stack ---------------------------------------------------------------------------------
+
+
+@dataclass
+class Stack:
+    """One compose project: its commands, environment, and the router's endpoint on the host."""
+
+    compose: list[str]
+    project: str
+    env: dict[str, str]
+    endpoint: str = ""
+
+    def cmd(
+        self,
+        *args: str,
+        env: dict[str, str] | None = None,
+        timeout: float = 180,
+        check: bool = True,
+    ) -> subprocess.CompletedProcess[str]:
+        base = [*self.compose, "-f", str(COMPOSE_FILE), "-p", self.project]
+        return _run([*base, *args], env={**self.env, **(env or {})}, timeout=timeout, check=check)
+
+    def container(self, service: str) -> str:
+        """The id of the service's container, running or not (by the labels both tools set)."""
+        proc = _run(
+            [
+                "docker",
+                "ps",
+                "-aq",
+                "--filter",
+                f"label=com.docker.compose.project={self.project}",
+                "--filter",
+                f"label=com.docker.compose.service={service}",
+            ]
+        )
+        ids = proc.stdout.split()
+        assert len(ids) == 1, f"{len(ids)} containers for {service}: {ids}"
+        return ids[0]
+
+    @property
+    def network(self) -> str:
+        return f"{self.project}_tracking"
+
+    def logs(self, *services: str) -> str:
+        return self.cmd("logs", "--no-color", "--timestamps", *services, check=False).stdout
+
+    def restarts(self) -> dict[str, int]:
+        """How often the engine restarted each long-running service (restart: on-failure)."""
+        out = {}
+        for service in ("router", "scorer", "primary_tracker", "source_tracker"):
+            proc = _run(
+                ["docker", "inspect", "-f", "{{.RestartCount}}", self.container(service)],
+                check=False,
+            )
+            out[service] = int(proc.stdout.strip() or -1)
+        return out
+
+    def sql(self, query_sql: str, *args: Any) -> list[list[Any]]:
+        """Rows of a read-only query on the scorer's database, run inside the scorer container."""
+        script = (
+            "import json, sqlite3, sys\n"
+            "db = sqlite3.connect('file:/data/scorer.sqlite?mode=ro', uri=True)\n"
+            "print(json.dumps(db.execute(sys.argv[1], json.loads(sys.argv[2])).fetchall()))\n"
+        )
+        proc = _run(
+            [
+                "docker",
+                "exec",
+                self.container("scorer"),
+                "python",
+                "-c",
+                script,
+                query_sql,
+                json.dumps(list(args)),
+            ],
+            timeout=60,
+        )
+        return list(json.loads(proc.stdout))
+
+    def steps(self, episode: str, name: str) -> dict[int, tuple[bool, float, float]]:
+        """k -> (transfer_used, t_sensor, t_recv) of filter ``name``'s estimates in ``episode``."""
+        rows = self.sql(
+            "SELECT k, transfer_used, t_sensor, t_recv FROM estimates WHERE episode = ? "
+            "AND filter = ? ORDER BY k",
+            episode,
+            name,
+        )
+        return {int(k): (bool(u), float(ts), float(tr)) for k, u, ts, tr in rows}
+
+
+def _clean_env() -> dict[str, str]:
+    """The caller's environment without its TLTRACK_* settings (they would leak into the stack)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("TLTRACK_", "COMPOSE_"))}
+    env["TLTRACK_IMAGE"] = IMAGE
+    return env
+
+
+def _remove_leftovers(project: str) -> list[str]:
+    """Remove whatever of ``project`` is left (containers, networks, volumes); what it removed."""
+    label = f"label=com.docker.compose.project={project}"
+    removed: list[str] = []
+    for kind, ls, rm in (
+        ("container", ["docker", "ps", "-aq"], ["docker", "rm", "-f"]),
+        ("network", ["docker", "network", "ls", "-q"], ["docker", "network", "rm"]),
+        ("volume", ["docker", "volume", "ls", "-q"], ["docker", "volume", "rm", "-f"]),
+    ):
+        ids = _run([*ls, "--filter", label], check=False).stdout.split()
+        if ids:
+            _run([*rm, *ids], check=False)
+            removed += [f"{kind} {i}" for i in ids]
+    return removed
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _reap_stale_projects() -> list[str]:
+    """Remove the projects of earlier runs whose pytest process is gone (killed before its
+    teardown could run); the names of those projects."""
+    label = "com.docker.compose.project"
+    projects: set[str] = set()
+    for kind in (["ps", "-a"], ["network", "ls"], ["volume", "ls"]):
+        proc = _run(
+            [
+                "docker",
+                *kind,
+                "--filter",
+                f"label={label}",
+                "--format",
+                f'{{{{.Label "{label}"}}}}',
+            ],
+            check=False,
+        )
+        projects.update(proc.stdout.split())
+    stale = []
+    for project in sorted(projects):
+        m = re.fullmatch(r"tltrack-test-(\d+)-[0-9a-f]{6}", project)
+        if m and not _pid_alive(int(m[1])):
+            _remove_leftovers(project)
+            stale.append(project)
+    return stale
+
+
+@pytest.fixture(scope="module")
+def stack(
+    compose: list[str], image: str, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Stack]:
+    if stale := _reap_stale_projects():
+        print(f"removed what killed earlier runs left behind: {stale}")
+    project = f"tltrack-test-{os.getpid()}-{secrets.token_hex(3)}"
+    s = Stack(compose, project, _clean_env())
+    # the router's port on a free loopback port of the host, chosen by the engine
+    s.env.update(TLTRACK_ROUTER_BIND="127.0.0.1", TLTRACK_ROUTER_PORT="0")
+    # what sensor_sim runs first: the five scored episodes
+    s.env.update(
+        TLTRACK_SIM_PRESET="arasaratnam-haykin",
+        TLTRACK_SIM_TRUTH="noise-free",
+        TLTRACK_SIM_PRIMARY_INTENSITY="4",
+        TLTRACK_SIM_PARTICLES="2000",
+        TLTRACK_SIM_STEPS=str(STEPS),
+        TLTRACK_SIM_EPISODES=str(EPISODES),
+        TLTRACK_SIM_FIRST_RUN="0",
+        TLTRACK_SIM_EPISODE_PREFIX="main",
+        TLTRACK_SIM_PACE="20",
+        TLTRACK_SCORER_GRACE_S="3",
+    )
+    logdir = tmp_path_factory.mktemp("compose")
+    try:
+        t0 = time.monotonic()
+        s.cmd("up", "-d", timeout=300)
+        print(f"{project}: up -d took {time.monotonic() - t0:.1f} s")
+        host_port = s.cmd("port", "router", "7447").stdout.strip().rsplit(":", 1)[-1]
+        s.endpoint = f"tcp/127.0.0.1:{int(host_port)}"
+        yield s
+    finally:
+        (logdir / f"{project}.log").write_text(s.logs())
+        print(f"{project}: logs in {logdir / (project + '.log')}")
+        t0 = time.monotonic()
+        down = s.cmd("down", "-v", "--remove-orphans", "--timeout", "10", check=False)
+        left = _remove_leftovers(project)
+        print(f"{project}: down -v took {time.monotonic() - t0:.1f} s; leftovers removed: {left}")
+        assert down.returncode == 0, f"compose down failed:\n{down.stderr[-3000:]}"
+
+
+# ---- talking to the scorer ---------------------------------------------------------------------
+
+
+def wait_for_summary(
+    endpoint: str, done: Any, timeout: float, every: float = 0.5
+) -> dict[str, Any] | None:
+    """Poll the scorer's summary until ``done(summary)``; the last summary seen, or None."""
+    last: dict[str, Any] | None = None
+    deadline = time.monotonic() + timeout
+    settings = ZenohSettings(endpoints=[endpoint], connect_timeout_ms=60_000)
+    with open_session(settings) as session:
+        while time.monotonic() < deadline:
+            for reply in query(session, keys.SCORER_SUMMARY, 5.0):
+                last = dict(json.loads(reply.payload))
+                if done(last):
+                    return last
+            time.sleep(every)
+    return last
+
+
+def scored(summary: dict[str, Any], prefix: str) -> list[dict[str, Any]]:
+    return [
+        e for e in summary.get("episodes", []) if e["episode"].startswith(prefix) and e["scored"]
+    ]
+
+
+def condensed(logs: str, tail: int = 80) -> str:
+    """The last ``tail`` log lines, with the per-step "no measurement ...; predicting" warnings
+    counted instead of listed."""
+    kept: list[str] = []
+    predicted: dict[str, int] = {}
+    for line in logs.splitlines():
+        if "; predicting" in line:
+            service = line.split("|", 1)[0].strip()
+            predicted[service] = predicted.get(service, 0) + 1
+        else:
+            kept.append(line)
+    notes = [f"({n} '... predicting' warnings of {svc} left out)" for svc, n in predicted.items()]
+    return "\n".join([*kept[-tail:], *notes])
+
+
+def wait_until(pred: Any, timeout: float, every: float = 0.5) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(every)
+    return False
+
+
+# ---- the tests ---------------------------------------------------------------------------------
+
+
+def test_compose_file_is_valid(compose: list[str]) -> None:
+    proc = _run([*compose, "-f", str(COMPOSE_FILE), "config", "-q"], env=_clean_env())
+    assert proc.returncode == 0
+
+
+def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
+    t0 = time.monotonic()
+    summary = wait_for_summary(
+        stack.endpoint, lambda s: len(scored(s, "main-")) >= EPISODES, timeout=300
+    )
+    elapsed = time.monotonic() - t0
+    assert summary is not None, "the scorer never answered\n" + stack.logs()[-6000:]
+    eps = scored(summary, "main-")
+    assert len(eps) == EPISODES, (
+        f"{len(eps)} of {EPISODES} scored after {elapsed:.0f} s:\n" + (stack.logs()[-6000:])
+    )
+    print(f"{EPISODES} episodes scored {elapsed:.1f} s after up -d")
+    assert all(e["complete"] and e["K"] == STEPS for e in eps), eps
+
+    filters = summary["filters"]
+    assert {"pf", "tl-pf", "source-pf"} <= filters.keys(), filters.keys()
+    for name, f in filters.items():
+        assert f["rmse_overall"] is not None and math.isfinite(f["rmse_overall"]), (name, f)
+        assert len(f["rmse_per_step"]) == STEPS, (name, len(f["rmse_per_step"]))
+        assert all(math.isfinite(v) for v in f["rmse_per_step"]), (name, f["rmse_per_step"])
+        assert f["steps"] == EPISODES * STEPS and f["gaps"] == 0, (name, f)
+    for operator, service, stats in stack.sql("SELECT operator, service, stats FROM service_stats"):
+        print(f"{operator}/{service}: {json.loads(stats).get('counters')}")
+    tl, iso = filters["tl-pf"]["rmse_overall"], filters["pf"]["rmse_overall"]
+    print(
+        f"RMSE over {EPISODES} episodes: tl-pf {tl:.2f} m, pf {iso:.2f} m, "
+        f"source-pf {filters['source-pf']['rmse_overall']:.2f} m"
+    )
+    assert tl < iso, f"TL-PF RMSE {tl:.2f} m is not below the isolated PF's {iso:.2f} m"
+    assert filters["tl-pf"]["steps_with_transfer"] > EPISODES * (STEPS - 1) // 2, filters["tl-pf"]
+
+
+def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack) -> None:
+    # Let the first test's episodes finish first (sensor_sim runs them in one container).
+    wait_for_summary(stack.endpoint, lambda s: len(scored(s, "main-")) >= EPISODES, timeout=300)
+    stack.cmd(
+        "up",
+        "-d",
+        "--no-deps",
+        "--force-recreate",
+        "sensor_sim",
+        env={
+            "TLTRACK_SIM_EPISODES": "1",
+            "TLTRACK_SIM_FIRST_RUN": "5",
+            "TLTRACK_SIM_EPISODE_PREFIX": "part",
+            "TLTRACK_SIM_STEPS": str(PART_STEPS),
+            "TLTRACK_SIM_PACE": str(PART_PACE),
+        },
+    )
+    source = stack.container("source_tracker")
+
+    # 1. the transfer works before the cut
+    def transfers_flowing() -> bool:
+        tl = stack.steps(PART_EPISODE, "tl-pf")
+        return sum(used for used, _, _ in tl.values()) >= 20
+
+    assert wait_until(transfers_flowing, 120), "no transfer before the cut\n" + stack.logs()[-6000:]
+
+    # 2. cut the source tracker off the network, for a few lease times
+    t_cut = time.time()
+    _run(["docker", "network", "disconnect", stack.network, source])
+    time.sleep(LEASE_S + 6.0)
+    t_heal = time.time()
+    _run(["docker", "network", "connect", "--alias", "source_tracker", stack.network, source])
+
+    # 3. the transfer resumes, and the episode ends and is scored
+    def resumed() -> bool:
+        tl = stack.steps(PART_EPISODE, "tl-pf")
+        return any(used and ts > t_heal for used, ts, _ in tl.values())
+
+    wait_until(resumed, 60)
+    summary = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "part-")), timeout=120)
+    logs = stack.logs("primary_tracker", "source_tracker")
+    restarts = stack.restarts()
+    tl = stack.steps(PART_EPISODE, "tl-pf")
+    iso = stack.steps(PART_EPISODE, "pf")
+    timeline = " ".join(
+        f"{k}{'+' if used else '-'}@{ts - t_cut:+.1f}"
+        for k, (used, ts, _) in sorted(tl.items())
+        if t_cut - 2 < ts < t_heal + 15
+    )
+    context = (
+        f"\ncut at t_cut, reconnected at t_cut{t_heal - t_cut:+.1f} s; restarts {restarts}"
+        f"\ntl-pf steps, k(+ with transfer / - without)@(t_sensor - t_cut): {timeline}\n"
+        + condensed(logs)
+    )
+
+    # the primary carried on while the source was cut off: every step, on time, and isolated
+    cut = [k for k, (_, ts, _) in tl.items() if t_cut + LEASE_S + 1.0 < ts < t_heal]
+    expected = (t_heal - t_cut - LEASE_S - 1.0) * PART_PACE
+    assert len(cut) >= 0.6 * expected, f"{len(cut)} steps while cut off" + context
+    assert all(k in iso for k in cut), "the isolated PF missed steps while cut off" + context
+    assert not any(tl[k][0] for k in cut), "a step used a transfer while cut off" + context
+    lag = max(tl[k][2] - tl[k][1] for k in cut)
+    assert lag < 2.0, f"the primary stalled while the source was cut off ({lag:.1f} s)" + context
+    assert "source s1 gone" in logs, "the primary never saw the source's token go" + context
+    # nothing crashed (a restarted tracker has lost the episode)
+    assert all(n == 0 for n in restarts.values()), f"a service crashed: {restarts}" + context
+    # the transfer resumed after the reconnection
+    after = sorted(k for k, (used, ts, _) in tl.items() if used and ts > t_heal)
+    assert after, "no transfer after the source was reconnected" + context
+    # the episode was scored, with every step of the primary
+    assert summary is not None and scored(summary, "part-"), "partition episode not scored" + (
+        context
+    )
+    assert sorted(tl) == list(range(1, PART_STEPS + 1)), "tl-pf missed steps" + context
+    assert sorted(iso) == list(range(1, PART_STEPS + 1)), "pf missed steps" + context
+    print(
+        f"partition: k={min(cut)}..{max(cut)} isolated while cut off ({len(cut)} steps); "
+        f"transfer back at k={after[0]}, {tl[after[0]][1] - t_heal:.1f} s after reconnecting; "
+        f"{len(after)} steps with transfer after it"
+    )
