@@ -77,6 +77,25 @@ class Job:
     filters: list[str]
 
 
+def loss_jobs(base: Config) -> list[Job]:
+    """PF and TL-PF under each preset and truth mode: how often, and why, tracks are lost."""
+    return [
+        Job(
+            f"loss_{p}_{t}",
+            base.with_(scenario="ct", preset=p, truth=t, particles=6000, primary_intensity=4),
+            PF_FILTERS,
+        )
+        for p in ("paper", "arasaratnam-haykin")
+        for t in ("fixed", "random", "noise-free")
+    ]
+
+
+def table2_pf_jobs(base: Config) -> list[Job]:
+    """Only Table 2's particle-filter rows (the 10,000-run target of the performance issue)."""
+    ct = base.with_(scenario="ct", primary_intensity=4)
+    return [Job(f"s2_n{n}", ct.with_(particles=n), PF_FILTERS) for n in PARTICLES]
+
+
 def jobs(base: Config) -> list[Job]:
     """Every Monte-Carlo experiment the section needs, each run once."""
     ct = base.with_(scenario="ct", particles=6000)
@@ -100,7 +119,7 @@ def jobs(base: Config) -> list[Job]:
 
 
 def run_all(
-    base: Config,
+    todo: list[Job],
     out: Path,
     *,
     workers: int | None = None,
@@ -108,7 +127,7 @@ def run_all(
 ) -> dict[str, dict[str, Any]]:
     """Run every job (``progress(label, runs_done)``), saving each one's results.json."""
     docs = {}
-    for job in jobs(base):
+    for job in todo:
         t0 = time.perf_counter()
 
         def advance(n: int, label: str = job.label) -> None:
@@ -131,6 +150,46 @@ def _fmt(x: float | None, digits: int = 2) -> str:
 
 def _row(cells: Iterable[Any]) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def table2_pf_report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
+    """Table 2's particle-filter rows only, beside the paper's, with the wall time."""
+    lines = [
+        "# Table 2, particle-filter rows",
+        "",
+        _row(
+            [
+                "N",
+                "RMSE iso (paper / ours)",
+                "RMSE TL (paper / ours)",
+                "lost iso / TL",
+                "runs",
+                "wall [min]",
+            ]
+        ),
+        _row(["---"] * 6),
+    ]
+    for n in PARTICLES:
+        d = docs[f"s2_n{n}"]
+        iso, tl = d["filters"]["pf"], d["filters"]["tl-pf"]
+        r_iso, _, r_tl, _ = TABLE2["pf", n]
+        lines.append(
+            _row(
+                [
+                    n,
+                    f"{r_iso} / {iso['rmse_overall']:.2f}",
+                    f"{r_tl} / {tl['rmse_overall']:.2f}",
+                    f"{iso['lost_fraction']:.1%} / {tl['lost_fraction']:.1%}",
+                    d["config"]["runs"],
+                    f"{d['wall_s'] / 60:.1f}",
+                ]
+            )
+        )
+    total = sum(d["wall_s"] for d in docs.values()) / 60
+    lines += ["", f"Total wall time: {total:.1f} min."]
+    path = out / "table2_pf.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
@@ -245,6 +304,29 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
                 ]
             )
         )
+    lines += [
+        "",
+        "## Lost tracks under each preset and truth mode (N = 6000, I_p = 4)",
+        "",
+        _row(
+            ["preset", "truth", "lost source-pf", "lost pf", "lost tl-pf", "RMSE pf", "RMSE tl-pf"]
+        ),
+        _row(["---"] * 7),
+    ]
+    for label, res in f.items():
+        if label.startswith("loss_"):
+            c = docs[label]["config"]
+            lines.append(
+                _row(
+                    [
+                        c["preset"],
+                        c["truth"],
+                        *(f"{res[n]['lost_fraction']:.1%}" for n in ("source-pf", "pf", "tl-pf")),
+                        _fmt(res["pf"]["rmse_overall"]),
+                        _fmt(res["tl-pf"]["rmse_overall"]),
+                    ]
+                )
+            )
     wall = sum(d.get("wall_s", 0.0) for d in docs.values())
     lines += [
         "",
