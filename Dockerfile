@@ -53,9 +53,11 @@ COPY --from=deps /opt/venv /opt/venv
 
 # tltrack itself last: a code change rebuilds only this small layer.
 COPY build/wheels/app/ /tmp/app/
+# Compiling the particle-filter kernels here puts numba's cache beside them in the image, so the
+# trackers start in seconds instead of compiling at every start.
 RUN pip install --no-index --no-deps /tmp/app/*.whl \
  && rm -rf /tmp/app \
- && python -c "import tltrack, services"
+ && python -c "import services; from tltrack.filters.particle import warm_up; warm_up()"
 
 # /data holds the scorer's SQLite database; mount a named volume there (a new named volume
 # inherits the owner tltrack from this directory).

@@ -5,7 +5,7 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 PYTEST  := $(BIN)/pytest
 
-.PHONY: demo test check lint bench reproduce zenohd clean
+.PHONY: demo test check lint warm bench reproduce zenohd clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -18,12 +18,16 @@ demo: $(STAMP)
 	$(BIN)/tltrack demo
 
 ## Every test: unit, integration over real Zenoh, container, browser and fault tests; ruff and mypy.
-test: $(STAMP) lint
+test: $(STAMP) lint warm
 	$(PYTEST) -q -ra
 
 ## The fast everyday subset: lint, types and unit tests.
-check: $(STAMP) lint
+check: $(STAMP) lint warm
 	$(PYTEST) -q -ra -m "not slow and not integration and not docker"
+
+## Compile the particle-filter kernels once, so parallel test processes load them from the cache.
+warm: $(STAMP)
+	$(BIN)/python -c "from tltrack.filters.particle import warm_up; warm_up()"
 
 lint: $(STAMP)
 	$(BIN)/ruff check shared services tests
