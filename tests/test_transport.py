@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from security_helpers import make_certs
 from tltrack import keys
 from tltrack.messages import Measurement, RejectCounter, Transfer, decode, encode
 from tltrack.transport import (
@@ -580,40 +581,10 @@ def test_acl_by_operator_prefix(tmp_path: Path) -> None:
         assert router_proc.stop() == 0
 
 
-def _openssl(*args: str, cwd: Path) -> None:
-    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True, timeout=30)
-
-
-def _make_pki(d: Path) -> None:
-    _openssl(
-        "req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
-        "-keyout", "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=tltrack-test-ca",
-        "-addext", "basicConstraints=critical,CA:TRUE",
-        "-addext", "keyUsage=critical,keyCertSign,cRLSign",
-        cwd=d,
-    )  # fmt: skip
-    for name in ("router", "primary"):
-        (d / f"{name}.ext").write_text(
-            "basicConstraints=CA:FALSE\nkeyUsage=critical,digitalSignature\n"
-            "extendedKeyUsage=serverAuth,clientAuth\n"
-            "subjectAltName=DNS:localhost,IP:127.0.0.1\n"
-        )
-        _openssl(
-            "req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
-            "-keyout", f"{name}.key", "-out", f"{name}.csr", "-subj", f"/CN={name}",
-            cwd=d,
-        )  # fmt: skip
-        _openssl(
-            "x509", "-req", "-in", f"{name}.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
-            "-CAcreateserial", "-out", f"{name}.pem", "-days", "2", "-extfile", f"{name}.ext",
-            cwd=d,
-        )  # fmt: skip
-
-
 @pytest.mark.integration
 @pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
 def test_mutual_tls(tmp_path: Path) -> None:
-    _make_pki(tmp_path)
+    make_certs(tmp_path, names="primary")  # scripts/make_certs.sh
     port = free_port()
     router_proc = start_router(
         f"tls/127.0.0.1:{port}",
