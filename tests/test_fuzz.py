@@ -374,11 +374,9 @@ def test_each_handler_counts_every_malformed_payload_once(
         assert len(svc.published) == published
 
 
-# Gaps found by this file, to be closed in the services (the report says how); strict, so each
-# one turns into a failure to remove once fixed.
+# Gaps this file found in the services, now closed: each test pins its fix.
 
 
-@pytest.mark.xfail(strict=True, reason="a replayed EpisodeStart is dropped without being counted")
 def test_a_replayed_episode_start_is_counted_as_a_duplicate(tmp_path: Path) -> None:
     start = _received(keys.episode(E), encode(_template("episode")))
     for name, (handler, svc) in _handlers(tmp_path).items():
@@ -386,7 +384,6 @@ def test_a_replayed_episode_start_is_counted_as_a_duplicate(tmp_path: Path) -> N
         assert svc.rejects.count(reason="duplicate") == 1, name
 
 
-@pytest.mark.xfail(strict=True, reason="samples of an episode not yet started are held unread")
 def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
     """Held unread, 64 samples of 4 unknown episodes may be anything up to zenoh's 1 GiB limit
     (measured: 20 x 50 MB kept 1 GB in the primary); refused at once, they cost nothing."""
@@ -402,9 +399,6 @@ def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
         assert svc.rejects.count(reason="not_msgpack") == 1, name
 
 
-@pytest.mark.xfail(
-    strict=True, reason="the scorer stores replayed, out-of-range and unknown records"
-)
 def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path: Path) -> None:
     scorer, svc = _handlers(tmp_path)["scorer"]
     truth, est = _template("truth"), _template("estimate")

@@ -19,7 +19,7 @@ from tltrack import keys
 from tltrack.config import Config
 from tltrack.filters.base import Estimate
 from tltrack.filters.particle import warm_up
-from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.messages import EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, wire_covariance
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -76,17 +76,7 @@ class PrimaryTracker:
             if info.service == SOURCE_TRACKER:
                 self._on_liveliness(info.source, item.is_put)
         elif info.kind == "episode":
-            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
-            if msg is not None:
-                for held in self.episodes.on_message(msg, self.s.recovery):
-                    self.handle(held)
-        elif (
-            info.kind in ("primary_meas", "transfer")
-            and info.episode is not None
-            and (self.episodes.get(info.episode) is None)
-        ):
-            if not self.episodes.hold(info.episode, item):
-                self.svc.count("sample_without_episode")
+            self.episodes.handle(item, self.svc.rejects, self.s.recovery)
         elif info.kind == "primary_meas" and info.episode is not None:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
@@ -121,7 +111,8 @@ class PrimaryTracker:
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
         if ep is None:
-            self.svc.count("measurement_without_episode")
+            if not self.episodes.hold(e, lambda: self._on_measurement(e, key, z)):
+                self.svc.rejects.add(key, "unknown_episode")
             return
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":
@@ -129,7 +120,11 @@ class PrimaryTracker:
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
         ep = self.episodes.get(e)
-        if ep is None or sid not in ep.sources:
+        if ep is None:
+            if not self.episodes.hold(e, lambda: self._on_transfer(e, sid, key, t)):
+                self.svc.rejects.add(key, "unknown_episode")
+            return
+        if sid not in ep.sources:
             self.svc.rejects.add(key, "unexpected_transfer")
             return
         if t.k_apply < ep.steps.next_k:

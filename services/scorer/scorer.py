@@ -27,6 +27,7 @@ from services.scorer.summary import summarize
 
 log = logging.getLogger("scorer")
 NAME = "scorer"
+SENSOR_SIM = "sensor_sim"  #: the sender of the truth
 
 
 class Settings(BaseSettings):
@@ -45,7 +46,7 @@ class Settings(BaseSettings):
 class Scorer:
     def __init__(self, settings: Settings, svc: Service, store: Store) -> None:
         self.s, self.svc, self.store = settings, svc, store
-        self.K: dict[str, int] = {}
+        self.K: dict[str, int] = dict(store.rows("SELECT episode, K FROM episodes"))
         self.expected: dict[str, int] = {}  # filters per episode: one per source, TL, isolated
         self.ended: dict[str, float] = {}  # episode -> monotonic time of its end
         self.last_seen: dict[str, float] = {}
@@ -76,15 +77,42 @@ class Scorer:
             self._on_episode(item)
         elif info.kind == "truth":
             truth = decode_received(item, Truth, self.svc.rejects)
-            if truth is not None:
-                self.store.truth(truth)
+            if truth is not None and self._admissible(item.key, truth, SENSOR_SIM):
+                self._stored(item.key, self.store.truth(truth))
         elif info.kind in ("source_estimate", "primary_estimate"):
             est = decode_received(item, EstimateMsg, self.svc.rejects)
-            if est is not None and self.store.estimate(est, item.t_recv):
+            owner = info.source if info.kind == "source_estimate" else keys.PRIMARY
+            if (
+                est is not None
+                and self._admissible(item.key, est, owner or "")
+                and self._stored(item.key, self.store.estimate(est, item.t_recv))
+            ):
                 self.counts[est.episode][est.filter] += 1
                 self.last_seen[est.episode] = time.monotonic()
         elif info.kind == "stats" and info.operator and info.service:
             self._on_stats(item, info.operator, info.service)
+
+    def _admissible(self, key: str, msg: Truth | EstimateMsg, sender: str) -> bool:
+        """Only the key's owner, about a known episode, for a step 1..K; else counted, dropped."""
+        K = self.K.get(msg.episode)
+        reason = (
+            "wrong_sender"
+            if msg.sender != sender
+            else "unknown_episode"
+            if K is None or msg.episode != keys.episode_of(key)
+            else "bad_step"
+            if not 1 <= msg.k <= K
+            else None
+        )
+        if reason is not None:
+            self.svc.rejects.add(key, reason)
+        return reason is None
+
+    def _stored(self, key: str, inserted: bool) -> bool:
+        """A record already stored for its (episode, [filter,] k) is a replay."""
+        if not inserted:
+            self.svc.rejects.add(key, "duplicate")
+        return inserted
 
     def _on_episode(self, item: Received) -> None:
         msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
@@ -92,7 +120,8 @@ class Scorer:
             self.store.episode_end(msg)
             self.ended[msg.episode] = time.monotonic()
         elif isinstance(msg, EpisodeStart):
-            self.store.episode_start(msg)
+            if not self._stored(item.key, self.store.episode_start(msg)):
+                return
             self.K[msg.episode] = msg.K
             self.expected[msg.episode] = 2 + len(msg.config.get("sources", []))
 

@@ -42,11 +42,12 @@ class Store:
         self.db.execute("COMMIT")
         self.db.execute("BEGIN")
 
-    def episode_start(self, m: EpisodeStart) -> None:
-        self.db.execute(
+    def episode_start(self, m: EpisodeStart) -> bool:
+        cur = self.db.execute(
             "INSERT OR IGNORE INTO episodes (episode, run, K, config, started) VALUES (?,?,?,?,?)",
             (m.episode, m.run, m.K, json.dumps(m.config), m.t_sensor),
         )
+        return cur.rowcount == 1
 
     def episode_end(self, m: EpisodeEnd) -> None:
         self.db.execute(

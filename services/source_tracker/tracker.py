@@ -12,7 +12,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
 from tltrack.filters.particle import warm_up
-from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.messages import EpisodeStart, EstimateMsg, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import Episodes, SourceEpisode, StepQueue, wire_covariance
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -54,18 +54,11 @@ class SourceTracker:
         if info is None:
             return
         if info.kind == "episode":
-            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
-            if msg is not None:
-                for held in self.episodes.on_message(msg, self.s.recovery):
-                    self.handle(held)
+            self.episodes.handle(item, self.svc.rejects, self.s.recovery)
         elif info.kind == "source_meas" and info.episode is not None:
-            if self.episodes.get(info.episode) is None:
-                if not self.episodes.hold(info.episode, item):
-                    self.svc.count("measurement_without_episode")
-                return
-            msg = decode_received(item, Measurement, self.svc.rejects)
-            if msg is not None:
-                self._on_measurement(info.episode, item.key, msg)
+            z = decode_received(item, Measurement, self.svc.rejects)
+            if z is not None:
+                self._on_measurement(info.episode, item.key, z)
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         if self.s.source_id not in {src.id for src in cfg.sources}:
@@ -78,6 +71,8 @@ class SourceTracker:
     def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
         ep = self.episodes.get(e)
         if ep is None:
+            if not self.episodes.hold(e, lambda: self._on_measurement(e, key, z)):
+                self.svc.rejects.add(key, "unknown_episode")
             return
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":

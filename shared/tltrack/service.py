@@ -92,7 +92,13 @@ class Service:
 
     def subscribe(self, *key_exprs: str, liveliness: bool = False) -> Subscriber:
         """One inbox for all ``key_exprs``: samples arrive in one queue, in arrival order."""
-        sub = Subscriber(self.session, list(key_exprs), liveliness=liveliness, history=liveliness)
+        sub = Subscriber(
+            self.session,
+            list(key_exprs),
+            liveliness=liveliness,
+            history=liveliness,
+            rejects=self.rejects,
+        )
         self._subs.append(sub)
         return sub
 

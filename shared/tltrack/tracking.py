@@ -10,7 +10,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 import numpy as np
 
@@ -20,9 +20,17 @@ from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Message, Transfer
+from tltrack.messages import (
+    EpisodeEnd,
+    EpisodeStart,
+    Measurement,
+    Message,
+    RejectCounter,
+    Transfer,
+)
 from tltrack.models.motion import motion_model
 from tltrack.models.observation import Observation
+from tltrack.transport import Received, decode_received
 
 T = TypeVar("T")
 
@@ -163,7 +171,8 @@ class Episodes(Generic[T]):
     At most ``capacity`` are kept; the oldest goes first, so a flood of episodes is bounded.
 
     Zenoh keeps order per key, not across keys, so a measurement can overtake its episode's start:
-    :meth:`hold` keeps a few such samples, and :meth:`on_message` hands them back once it opens.
+    :meth:`hold` keeps the handling of a few such (already validated) messages for later, and
+    :meth:`on_message` hands them back once the episode opens.
     """
 
     HELD_EPISODES = 4
@@ -174,10 +183,19 @@ class Episodes(Generic[T]):
         self._open = open
         self._state: dict[str, T] = {}
         self._last_k: dict[str, int] = {}
-        self._held: dict[str, list[Any]] = {}
+        self._held: dict[str, list[Callable[[], None]]] = {}
 
-    def hold(self, e: str, item: Any) -> bool:
-        """Keep a sample of a not-yet-opened episode; False when the bounded store is full."""
+    def handle(self, item: Received, rejects: RejectCounter, recovery: bool) -> None:
+        """Act on a sample of an episode key; a replayed start is counted as a duplicate."""
+        msg = decode_received(item, (EpisodeStart, EpisodeEnd), rejects)
+        if isinstance(msg, EpisodeStart) and msg.episode in self._state:
+            rejects.add(item.key, "duplicate")
+        elif msg is not None:
+            for later in self.on_message(msg, recovery):
+                later()
+
+    def hold(self, e: str, item: Callable[[], None]) -> bool:
+        """Keep the handling of a message of a not-yet-opened episode; False when full."""
         if e not in self._held:
             if len(self._held) >= self.HELD_EPISODES:
                 self._held.pop(next(iter(self._held)))
@@ -187,7 +205,7 @@ class Episodes(Generic[T]):
         self._held[e].append(item)
         return True
 
-    def on_message(self, msg: Message, recovery: bool) -> list[Any]:
+    def on_message(self, msg: Message, recovery: bool) -> list[Callable[[], None]]:
         """Open or end an episode; returns the samples held for an episode it opens.
 
         ``recovery`` is the tracker's own setting, not the episode's.

@@ -32,7 +32,14 @@ import zenoh
 from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from tltrack.messages import Message, MessageRejected, RejectCounter, decode, encode
+from tltrack.messages import (
+    MAX_PAYLOAD_BYTES,
+    Message,
+    MessageRejected,
+    RejectCounter,
+    decode,
+    encode,
+)
 
 log = logging.getLogger(__name__)
 
@@ -243,7 +250,9 @@ class Subscriber:
         *,
         liveliness: bool = False,
         history: bool = False,
+        rejects: RejectCounter | None = None,
     ) -> None:
+        self.rejects = rejects
         self.key_exprs: tuple[str, ...] = (
             (key_exprs,) if isinstance(key_exprs, str) else tuple(key_exprs)
         )
@@ -258,16 +267,23 @@ class Subscriber:
                         key, self._on_sample, history=history
                     )
                 else:
-                    sub = session.declare_subscriber(key, self._on_sample)
+                    # indirect=False: zenoh calls back on its own thread, in arrival order across
+                    # all the keys, instead of one thread per subscription.
+                    handler = zenoh.handlers.Callback(self._on_sample, indirect=False)
+                    sub = session.declare_subscriber(key, handler)
                 self._subs.append(sub)
         except BaseException:
             self.close()
             raise
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._queue.push(
-            Received(str(sample.key_expr), sample.payload.to_bytes(), sample.kind, time.time())
-        )
+        """Queue the sample; one too large to be any message is refused before it is copied."""
+        key = str(sample.key_expr)
+        if len(sample.payload) > MAX_PAYLOAD_BYTES:
+            if self.rejects is not None:
+                self.rejects.add(key, "too_large")
+            return
+        self._queue.push(Received(key, sample.payload.to_bytes(), sample.kind, time.time()))
 
     def recv(self, timeout: float | None = None) -> Received | None:
         """The next sample, waiting up to ``timeout`` s (forever if None); None on timeout/close."""
