@@ -164,12 +164,6 @@ class StaysIsolatedError(AssertionError):
     """The primary used no transfer of a source that came back."""
 
 
-@pytest.mark.xfail(
-    raises=StaysIsolatedError,
-    strict=True,
-    reason="a restarted source tracker only "
-    "learns an episode from its EpisodeStart, so it sits out the one under way",
-)
 def test_a_restarted_source_resumes_the_episode_under_way(tmp_path: Path) -> None:
     db, K = tmp_path / "scorer.sqlite", 130
     with stack(tmp_path) as s:

@@ -1,7 +1,6 @@
 import pytest
-from typer.testing import CliRunner
-
 from tltrack.cli import app
+from typer.testing import CliRunner
 
 pytestmark = pytest.mark.slow
 

@@ -231,8 +231,10 @@ def main(argv: list[str] | None = None) -> None:
         liveliness = svc.subscribe(
             keys.alive(keys.source_operator(keys.ANY), SOURCE_TRACKER), liveliness=True
         )
-        svc.announce()
         tracker = PrimaryTracker(settings, svc)
+        for item in svc.running_episodes():
+            tracker.handle(item)
+        svc.announce()
         wait: float | None = None
         while not svc.stop.is_set():
             for item in liveliness.drain():

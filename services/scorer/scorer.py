@@ -114,6 +114,14 @@ class Scorer:
             self.svc.rejects.add(key, "duplicate")
         return inserted
 
+    def catch_up(self, items: list[Received]) -> None:
+        """Learn the episodes under way when (re)started mid-episode; known ones are no replay."""
+        for item in items:
+            start = decode_received(item, EpisodeStart, self.svc.rejects)
+            if start is not None and self.store.episode_start(start):
+                self.K[start.episode] = start.K
+                self.expected[start.episode] = 2 + len(start.config.get("sources", []))
+
     def _on_episode(self, item: Received) -> None:
         msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
         if isinstance(msg, EpisodeEnd):
@@ -171,6 +179,7 @@ def main(argv: list[str] | None = None) -> None:
                 keys.PRIMARY_ESTIMATES,
                 f"{keys.ROOT}/**/stats/*",
             )
+            scorer.catch_up(svc.running_episodes())
             with Queryable(svc.session, keys.SCORER_SUMMARY, scorer.answer):
                 svc.announce()
                 last_refresh = time.monotonic()

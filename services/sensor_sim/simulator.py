@@ -21,9 +21,9 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config, ConfigError, load_config, make_config
 from tltrack.engine.scenario import PRIMARY, simulate
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth
+from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.transport import LivelinessWatcher, ZenohSettings
+from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
 
 from services.sensor_sim import replay
 
@@ -116,21 +116,25 @@ class Simulator:
             truth: NDArray[np.float64] | None = sim.truth
         else:
             z, truth = self.recorded, None
-        now = time.time()
-        self.svc.publish(
-            keys.episode(e),
-            EpisodeStart(
-                episode=e,
-                sender=NAME,
-                k=0,
-                t_sensor=now,
-                run=run,
-                config=self.cfg.model_dump(mode="json"),
-                K=self.cfg.K,
-                steps_per_sec=1.0 / self.period if self.period else 0.0,
-            ),
+        start = EpisodeStart(
+            episode=e,
+            sender=NAME,
+            k=0,
+            t_sensor=time.time(),
+            run=run,
+            config=self.cfg.model_dump(mode="json"),
+            K=self.cfg.K,
+            steps_per_sec=1.0 / self.period if self.period else 0.0,
         )
+        self.svc.publish(keys.episode(e), start)
         log.info("episode %s: run %d, %d steps", e, run, self.cfg.K)
+        # a service that (re)starts mid-episode asks for the start it missed
+        with Queryable(self.svc.session, keys.episode(e), lambda _params: encode(start)):
+            self._publish_steps(e, z, truth)
+
+    def _publish_steps(
+        self, e: str, z: dict[str, NDArray[np.float64]], truth: NDArray[np.float64] | None
+    ) -> None:
         t_next = time.monotonic()
         for k in range(1, self.cfg.K + 1):
             if self.svc.stop.is_set():

@@ -133,8 +133,10 @@ def main(argv: list[str] | None = None) -> None:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))
-        svc.announce()
         tracker = SourceTracker(settings, svc)
+        for item in svc.running_episodes():
+            tracker.handle(item)
+        svc.announce()
         while not svc.stop.is_set():
             for item in svc.drain(inbox, timeout=0.1):
                 tracker.handle(item)

@@ -34,6 +34,7 @@ from tltrack.transport import (
     ZenohSettings,
     declare_token,
     open_session,
+    query,
 )
 
 log = logging.getLogger(__name__)
@@ -101,6 +102,11 @@ class Service:
         )
         self._subs.append(sub)
         return sub
+
+    def running_episodes(self) -> list[Received]:
+        """The EpisodeStart of every episode under way, from sensor_sim's queryables: a service
+        that (re)starts mid-episode joins it instead of sitting it out."""
+        return query(self.session, keys.EPISODES, timeout=2.0)
 
     def announce(self) -> None:
         """Declare the liveliness token; call it once every subscription is in place."""
