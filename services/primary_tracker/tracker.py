@@ -146,9 +146,11 @@ class PrimaryTracker:
         wait: float | None = None
         for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
-                for k in ep.steps.skip():
-                    log.warning("episode %s: no measurement for step %d; transfer only", e, k)
-                    self._step(e, ep, k, None, time.time(), ep.transfers.pop(k, {}))
+                skipped = ep.steps.skip()
+                log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
+                for k in skipped:  # on the clock, but nothing published: a gap, not a guess
+                    ep.tracker.step(None, ep.transfers.pop(k, {}))
+                    self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 now = time.monotonic()
                 if ep.ready_since is None:
@@ -167,7 +169,7 @@ class PrimaryTracker:
                 ep.steps.release()
                 ep.transfers.pop(z.k, None)
                 ep.ready_since = None
-                self._step(e, ep, z.k, z, z.t_sensor, have)
+                self._step(e, ep, z, have)
             self.episodes.retire(e, ep.steps.next_k)
         return wait
 
@@ -175,22 +177,15 @@ class PrimaryTracker:
         """A source whose token went away is not waited for; an unseen one is (it may be late)."""
         return sid in self.alive or sid not in self.seen
 
-    def _step(
-        self,
-        e: str,
-        ep: Episode,
-        k: int,
-        z: Measurement | None,
-        t_sensor: float,
-        transfers: dict[str, Transfer],
-    ) -> None:
+    def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
+        k, t_sensor = z.k, z.t_sensor
         t0 = time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
         used = bool(transfers)
         self._publish(e, "tl", ep.tracker.tl_name, k, t_sensor, tl, used, step_ms)
         self._publish(e, "isolated", ep.tracker.iso_name, k, t_sensor, iso, False, step_ms)
-        self.svc.count("steps" if z is not None else "steps_without_measurement")
+        self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
 
     def _publish(

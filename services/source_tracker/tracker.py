@@ -82,15 +82,18 @@ class SourceTracker:
         """Step on every measurement in order; predict through steps missing too long."""
         for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
-                for k in ep.steps.skip():
-                    log.warning("episode %s: no measurement for step %d; predicting", e, k)
-                    self._step(e, ep, k, None, time.time())
+                skipped = ep.steps.skip()
+                log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
+                for _ in skipped:  # on the clock, but nothing published: a gap, not a guess
+                    ep.tracker.step(None)
+                    self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
-                self._step(e, ep, z.k, z, z.t_sensor)
+                self._step(e, ep, z)
             self.episodes.retire(e, ep.steps.next_k)
 
-    def _step(self, e: str, ep: Episode, k: int, z: Measurement | None, t_sensor: float) -> None:
+    def _step(self, e: str, ep: Episode, z: Measurement) -> None:
+        k, t_sensor = z.k, z.t_sensor
         t0 = time.perf_counter()
         est, eta = ep.tracker.step(z)
         step_ms = (time.perf_counter() - t0) * 1e3
@@ -123,7 +126,7 @@ class SourceTracker:
                 step_ms=step_ms,
             ),
         )
-        self.svc.count("steps" if z is not None else "steps_predicted_only")
+        self.svc.count("steps")
 
 
 def main(argv: list[str] | None = None) -> None:
