@@ -71,10 +71,12 @@ class ReferenceSIR:
         w /= w.sum(axis=1, keepdims=True)
         cdf = np.cumsum(w, axis=1)
         cdf[:, -1] = 1.0
-        idx = np.stack([
-            np.searchsorted(cdf[b], (np.arange(self.N) + g.random()) / self.N, side="right")
-            for b, g in enumerate(self.rngs)
-        ])
+        idx = np.stack(
+            [
+                np.searchsorted(cdf[b], (np.arange(self.N) + g.random()) / self.N, side="right")
+                for b, g in enumerate(self.rngs)
+            ]
+        )
         self.x = np.take_along_axis(self.x, np.minimum(idx, self.N - 1)[None], axis=2)
 
     def estimate(self):
@@ -104,8 +106,11 @@ def _experiment(make_filter, cfg, runs):
         zp = Observation.broadcast(sp, np.stack([s.z[PRIMARY][k - 1] for s in sims], 1), Rp)
         zs = Observation.broadcast(ss, np.stack([s.z[sid][k - 1] for s in sims], 1), Rs)
         est_s, upcoming = src.step(zs)
-        ests = {"source-pf": est_s, "pf": iso.step(zp),
-                "tl-pf": tl.step(zp, [transfer] if transfer is not None else [])}
+        ests = {
+            "source-pf": est_s,
+            "pf": iso.step(zp),
+            "tl-pf": tl.step(zp, [transfer] if transfer is not None else []),
+        }
         for name, est in ests.items():
             d = est.mean - truth[k]
             sq[name].append(d[:, 0] ** 2 + d[:, 2] ** 2)
@@ -191,12 +196,24 @@ def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
     # two statements from one place share a range and a bearing per particle; a third is elsewhere
     mean2 = np.array([[1450.0, 1350.0, 1250.0], [-3.14, 3.135, 0.45]])
     far = RangeBearing(rb.sigma_r, rb.sigma_bearing, (-500.0, 800.0))
-    stmts = [Observation(fast, mean, cov, mask), Observation(fast, mean2, 3 * cov),
-             Observation(far, mean2, 2 * cov)]
+    stmts = [
+        Observation(fast, mean, cov, mask),
+        Observation(fast, mean2, 3 * cov),
+        Observation(far, mean2, 2 * cov),
+    ]
     got = f.log_weights(stmts)
-    want = sum(gaussian_loglik(Observation(SlowRB(o.sensor.sigma_r, o.sensor.sigma_bearing,
-                                                  o.sensor.position), o.mean, o.cov, o.mask), f.x)
-               for o in stmts)
+    want = sum(
+        gaussian_loglik(
+            Observation(
+                SlowRB(o.sensor.sigma_r, o.sensor.sigma_bearing, o.sensor.position),
+                o.mean,
+                o.cov,
+                o.mask,
+            ),
+            f.x,
+        )
+        for o in stmts
+    )
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
     R = fast.R(2.0)
     got_o, want_o = f.predicted_observation(fast, R), f.predicted_observation(slow, R)
@@ -214,8 +231,9 @@ def test_estimate_from_offspring_counts_is_the_resampled_clouds_moments():
     mean = x.mean(axis=2).T
     d = x - mean.T[:, :, None]
     np.testing.assert_allclose(est.mean, mean, rtol=1e-12)
-    np.testing.assert_allclose(est.cov, np.einsum("ibn,jbn->bij", d, d) / f.N + f.model.Q,
-                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        est.cov, np.einsum("ibn,jbn->bij", d, d) / f.N + f.model.Q, rtol=1e-9, atol=1e-9
+    )
 
 
 def test_reading_x_changes_nothing():
@@ -260,7 +278,7 @@ def test_results_do_not_depend_on_the_batch_size(N):
     def track(batch):
         out = {}
         for start in range(0, len(runs), batch):
-            rs = runs[start:start + batch]
+            rs = runs[start : start + batch]
             x0 = np.stack([sims[r].x0_hat for r in rs], axis=1)
             P0 = np.diag(cfg.P0_diag)
             src = Source(ParticleFilter(model, x0, P0, N, streams(5, rs, "src")), s, R)
@@ -390,8 +408,13 @@ def test_elementary_functions_pass_nan_and_infinity_through():
 def test_tiny_and_odd_clouds(N):
     cfg = make_config(particles=10)
     s = sensor(cfg)
-    pf = ParticleFilter(motion_model(cfg), np.asarray(cfg.x0)[:, None], np.diag(cfg.P0_diag), N,
-                        streams(0, [0], "tiny"))
+    pf = ParticleFilter(
+        motion_model(cfg),
+        np.asarray(cfg.x0)[:, None],
+        np.diag(cfg.P0_diag),
+        N,
+        streams(0, [0], "tiny"),
+    )
     for k in range(3):
         pf.predict()
         obs = pf.predicted_observation(s, s.R(1.0))
