@@ -19,6 +19,7 @@ from typing import Any
 import zenoh
 from livestack import sim_flags
 from tltrack import demo, keys
+from tltrack.demo import IDENTITY, identity_env, passwords
 from tltrack.transport import LivelinessWatcher, ZenohSettings, open_session, query
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,28 +29,9 @@ USERS = DEPLOY / "users.txt"
 ROUTER_TLS_ENV = DEPLOY / "router-tls.env"
 MAKE_CERTS = ROOT / "scripts" / "make_certs.sh"
 
-#: the identity each service runs under (README: who may read what)
-IDENTITY = {
-    "sensor_sim": "sensor",
-    "scorer": "referee",
-    "primary_tracker": "primary",
-    "source_tracker": "source-s1",
-    "dashboard": "dashboard",
-}
 TRACKING = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")  #: what an episode needs
 FUZZER = "fuzzer"
 SCORER_ENV = {"TLTRACK_SCORER_GRACE_S": "3"}
-
-
-def passwords(users: Path = USERS) -> dict[str, str]:
-    """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
-    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
-    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
-
-
-def identity_env(user: str, users: Path = USERS) -> dict[str, str]:
-    """The environment that makes a service connect as ``user``."""
-    return {"TLTRACK_ZENOH_USERNAME": user, "TLTRACK_ZENOH_PASSWORD": passwords(users)[user]}
 
 
 def load_acl(path: Path = ACL) -> dict[str, Any]:

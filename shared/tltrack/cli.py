@@ -260,8 +260,13 @@ def demo(
     db = out / "scorer.sqlite"
     for suffix in ("", "-wal", "-shm"):
         Path(f"{db}{suffix}").unlink(missing_ok=True)
-    console.print(f"router {endpoint}; logs in {out / 'logs'}")
-    with d.Stack(endpoint, out / "logs") as stack:
+    secure = d.ACCESS_DIR.exists()  # a checkout ships the ACL: operators isolated by default
+    user = "referee" if secure else None
+    console.print(
+        f"router {endpoint}{' (access control: deploy/zenoh)' if secure else ''}; "
+        f"logs in {out / 'logs'}"
+    )
+    with d.Stack(endpoint, out / "logs", secure=secure) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         stack.start_service("primary_tracker")
@@ -293,7 +298,7 @@ def demo(
         if rc != 0:
             console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)
-        summary = d.wait_for_scored(endpoint, 1, 120)
+        summary = d.wait_for_scored(endpoint, 1, 120, user)
         if serve and summary is not None:
             print_summary(summary)
             console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")

@@ -30,12 +30,49 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+#: The shipped access control (deploy/zenoh in a checkout): one identity per operator.
+ACCESS_DIR = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
+#: the identity each service runs under (README: who may read what)
+IDENTITY = {
+    "sensor_sim": "sensor",
+    "scorer": "referee",
+    "primary_tracker": "primary",
+    "source_tracker": "source-s1",
+    "dashboard": "dashboard",
+}
+
+
+def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
+    """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
+    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
+    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
+
+
+def identity_env(user: str, users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
+    """The environment that makes a service connect as ``user``."""
+    return {"TLTRACK_ZENOH_USERNAME": user, "TLTRACK_ZENOH_PASSWORD": passwords(users)[user]}
+
+
+def router_access_env(access: Path = ACCESS_DIR) -> dict[str, str]:
+    """The router's environment for enforcing the ACL (for the router only: a client given it
+    would apply the ACL to its own link and deny itself)."""
+    return {
+        "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(access / "acl.json5"),
+        "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(access / "users.txt"),
+    }
+
+
 @dataclass
 class Stack:
-    """A router and services as child processes, each logging to ``logs/<name>.log``."""
+    """A router and services as child processes, each logging to ``logs/<name>.log``.
+
+    ``secure``: the router enforces the shipped ACL and each service runs under its operator's
+    identity, as in a deployment.
+    """
 
     endpoint: str
     logs: Path
+    secure: bool = False
     env: dict[str, str] = field(default_factory=dict)
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     _files: list[IO[bytes]] = field(default_factory=list)
@@ -60,10 +97,12 @@ class Stack:
         )
 
     def start_router(self) -> None:
-        self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint])
+        access = router_access_env() if self.secure else {}
+        self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
 
     def start_service(self, name: str, *flags: str, env: dict[str, str] | None = None) -> None:
-        self.start(name, ["-m", f"services.{name}", *flags], env)
+        identity = identity_env(IDENTITY[name]) if self.secure else {}
+        self.start(name, ["-m", f"services.{name}", *flags], {**identity, **(env or {})})
 
     def wait(self, name: str, timeout: float) -> int | None:
         try:
@@ -103,22 +142,30 @@ class Stack:
 
 
 @contextlib.contextmanager
-def client(endpoint: str) -> Iterator[zenoh.Session]:
-    with open_session(ZenohSettings(endpoints=[endpoint])) as session:
+def client(endpoint: str, user: str | None = None) -> Iterator[zenoh.Session]:
+    """A client session, under identity ``user`` when the router enforces the ACL."""
+    creds: dict[str, Any] = {}
+    if user is not None:
+        creds = {"username": user, "password": passwords()[user]}
+    with open_session(ZenohSettings(endpoints=[endpoint], **creds)) as session:
         yield session
 
 
-def fetch_summary(endpoint: str, timeout: float = 5.0) -> dict[str, Any] | None:
-    with client(endpoint) as session:
+def fetch_summary(
+    endpoint: str, timeout: float = 5.0, user: str | None = None
+) -> dict[str, Any] | None:
+    with client(endpoint, user) as session:
         for r in query(session, keys.SCORER_SUMMARY, timeout):
             return dict(json.loads(r.payload))
     return None
 
 
-def wait_for_scored(endpoint: str, episodes: int, timeout: float) -> dict[str, Any] | None:
+def wait_for_scored(
+    endpoint: str, episodes: int, timeout: float, user: str | None = None
+) -> dict[str, Any] | None:
     """Poll the scorer until ``episodes`` episodes are scored."""
     deadline = time.monotonic() + timeout
-    with client(endpoint) as session:
+    with client(endpoint, user) as session:
         while time.monotonic() < deadline:
             for r in query(session, keys.SCORER_SUMMARY, 5.0):
                 s = dict(json.loads(r.payload))
