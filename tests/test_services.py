@@ -22,7 +22,7 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path):
             s, db, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"}, sim=sim_flags(K, N, pace=0)
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 60)
+        summary = demo.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     cfg = make_config(
         preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True
@@ -44,8 +44,8 @@ def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
         s.kill("source_tracker")
         killed_at = max(estimates(db)["tl-pf"])
         assert s.wait("sensor_sim", 60) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 60)
-    assert summary is not None
+        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        assert summary is not None, logs(s)
     tl = estimates(db)["tl-pf"]
     assert sorted(tl) == list(range(1, K + 1)), "the primary missed steps"
     assert all(tl[k][1] for k in range(2, killed_at - 1)), "transfer used before the kill"
@@ -63,8 +63,8 @@ def test_services_start_in_any_order_router_last(tmp_path):
         time.sleep(2.0)
         s.start_router()
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 60)
-    assert summary is not None
+        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        assert summary is not None, logs(s)
     for name in ("tl-pf", "pf", "source-pf"):
         assert summary["filters"][name]["steps"] == 20
         assert summary["filters"][name]["gaps"] == 0
@@ -140,7 +140,7 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
             ),
             30,
         )
-        summary = demo.wait_for_scored(s.endpoint, 1, 60)
+        summary = demo.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None
         for svc in ("primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"):
             assert sum(summary["messages"]["rejected"][svc].values()) >= len(GARBAGE), svc
@@ -176,6 +176,6 @@ def test_services_run_against_a_stock_zenohd(tmp_path):
             s.start_service(name, env=env)
         s.start_service("sensor_sim", *sim_flags(20, 300, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 60)
-    assert summary is not None
+        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        assert summary is not None, logs(s)
     assert summary["filters"]["tl-pf"]["steps_with_transfer"] == 19
