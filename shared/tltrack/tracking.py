@@ -15,6 +15,7 @@ from typing import Generic, TypeVar
 import numpy as np
 
 from tltrack.config import Config
+from tltrack.engine.montecarlo import reported_name
 from tltrack.engine.registry import build, parse, recovery
 from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
 from tltrack.filters.base import Estimate, Filter
@@ -69,10 +70,11 @@ class SourceEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
         self.cfg, self.source_id = cfg, source_id
-        self.name = f"source-{kind}"
+        spec = parse(f"source-{kind}")
+        self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
         s = sensor(cfg, source_id)
-        filt = _filter(cfg, self.name, run, source_id)
-        self.role = Source(filt, s, s.R(intensity(cfg, source_id)), recovery(parse(self.name), cfg))
+        filt = _filter(cfg, spec.name, run, source_id)
+        self.role = Source(filt, s, s.R(intensity(cfg, source_id)), recovery(spec, cfg))
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
