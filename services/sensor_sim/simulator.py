@@ -61,6 +61,7 @@ class Settings(BaseSettings):
         description="operator:service tokens to await before starting",
     )
     wait_timeout_s: float = Field(60.0, gt=0)
+    linger_s: float = Field(1.0, ge=0, description="wait before closing, so the link drains")
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
@@ -192,3 +193,6 @@ def main(argv: list[str] | None = None) -> None:
             if svc.stop.is_set():
                 break
             sim.run_episode(i)
+        # Closing a session may drop what is still queued for the link: at full pace the last
+        # steps and the EpisodeEnd would be lost. Give the link time to drain first.
+        svc.stop.wait(settings.linger_s)
