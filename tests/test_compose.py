@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from livestack import wait_until
 from tltrack import keys
 from tltrack.transport import ZenohSettings, open_session, query
 
@@ -360,15 +361,6 @@ def condensed(logs: str, tail: int = 80) -> str:
     return "\n".join([*kept[-tail:], *notes])
 
 
-def wait_until(pred: Any, timeout: float, every: float = 0.5) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(every)
-    return False
-
-
 # ---- the tests ---------------------------------------------------------------------------------
 
 
@@ -433,7 +425,9 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
         tl = stack.steps(PART_EPISODE, "tl-pf")
         return sum(used for used, _, _ in tl.values()) >= 20
 
-    assert wait_until(transfers_flowing, 120), "no transfer before the cut\n" + stack.logs()[-6000:]
+    assert wait_until(transfers_flowing, 120, every=0.5), (
+        "no transfer before the cut\n" + stack.logs()[-6000:]
+    )
 
     # 2. cut the source tracker off the network, for a few lease times
     t_cut = time.time()
@@ -447,7 +441,7 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
         tl = stack.steps(PART_EPISODE, "tl-pf")
         return any(used and ts > t_heal for used, ts, _ in tl.values())
 
-    wait_until(resumed, 60)
+    wait_until(resumed, 60, every=0.5)
     summary = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "part-")), timeout=120)
     logs = stack.logs("primary_tracker", "source_tracker")
     restarts = stack.restarts()

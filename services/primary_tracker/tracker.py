@@ -80,7 +80,7 @@ class PrimaryTracker:
         elif info.kind == "primary_meas" and info.episode is not None:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
-                self._on_measurement(info.episode, item.key, z)
+                self.episodes.offer(info.episode, item.key, z, self.svc.rejects)
         elif info.kind == "transfer" and info.episode is not None and info.source is not None:
             t = decode_received(item, Transfer, self.svc.rejects)
             if t is not None:
@@ -107,16 +107,6 @@ class PrimaryTracker:
             PrimaryEpisode(cfg, start.run, self.s.filter, self.s.robust),
             [s.id for s in cfg.sources],
         )
-
-    def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
-        ep = self.episodes.get(e)
-        if ep is None:
-            if not self.episodes.hold(e, lambda: self._on_measurement(e, key, z)):
-                self.svc.rejects.add(key, "unknown_episode")
-            return
-        verdict = ep.steps.offer(z.k, z)
-        if verdict != "accepted":
-            self.svc.rejects.add(key, verdict)
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
         ep = self.episodes.get(e)

@@ -58,7 +58,7 @@ class SourceTracker:
         elif info.kind == "source_meas" and info.episode is not None:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
-                self._on_measurement(info.episode, item.key, z)
+                self.episodes.offer(info.episode, item.key, z, self.svc.rejects)
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         if self.s.source_id not in {src.id for src in cfg.sources}:
@@ -67,16 +67,6 @@ class SourceTracker:
         tracker = SourceEpisode(cfg, start.run, self.s.filter, self.s.source_id)
         log.info("episode %s (run %d): %s", start.episode, start.run, tracker.name)
         return Episode(start, tracker)
-
-    def _on_measurement(self, e: str, key: str, z: Measurement) -> None:
-        ep = self.episodes.get(e)
-        if ep is None:
-            if not self.episodes.hold(e, lambda: self._on_measurement(e, key, z)):
-                self.svc.rejects.add(key, "unknown_episode")
-            return
-        verdict = ep.steps.offer(z.k, z)
-        if verdict != "accepted":
-            self.svc.rejects.add(key, verdict)
 
     def advance(self) -> None:
         """Step on every measurement in order; predict through steps missing too long."""

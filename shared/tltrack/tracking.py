@@ -10,7 +10,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Generic, TypeVar
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -165,7 +165,16 @@ class StepQueue(Generic[T]):
         return list(range(first, self.next_k))
 
 
-class Episodes(Generic[T]):
+class Tracked(Protocol):
+    """What an episode's state needs for :meth:`Episodes.offer`: its queue of measurements."""
+
+    steps: StepQueue[Measurement]
+
+
+E = TypeVar("E", bound=Tracked)
+
+
+class Episodes(Generic[E]):
     """The episodes a tracker follows, each with its state ``T``.
 
     An :class:`EpisodeStart` opens one (through ``open``, which may decline with None); an
@@ -180,10 +189,10 @@ class Episodes(Generic[T]):
     HELD_EPISODES = 4
     HELD_PER_EPISODE = 64
 
-    def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], T | None]) -> None:
+    def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], E | None]) -> None:
         self.capacity = capacity
         self._open = open
-        self._state: dict[str, T] = {}
+        self._state: dict[str, E] = {}
         self._last_k: dict[str, int] = {}
         self._held: dict[str, list[Callable[[], None]]] = {}
 
@@ -228,10 +237,25 @@ class Episodes(Generic[T]):
         self._state[msg.episode] = state
         return self._held.pop(msg.episode, [])
 
-    def get(self, e: str) -> T | None:
+    def offer(self, e: str, key: str, z: Measurement, rejects: RejectCounter) -> None:
+        """Queue ``z`` in its episode's step order; held while the episode is not yet open.
+
+        A duplicate, a stale step, one far ahead, or one of an episode that never opens (once
+        the hold is full) is counted under its key.
+        """
+        ep = self.get(e)
+        if ep is None:
+            if not self.hold(e, lambda: self.offer(e, key, z, rejects)):
+                rejects.add(key, "unknown_episode")
+            return
+        verdict = ep.steps.offer(z.k, z)
+        if verdict != "accepted":
+            rejects.add(key, verdict)
+
+    def get(self, e: str) -> E | None:
         return self._state.get(e)
 
-    def items(self) -> list[tuple[str, T]]:
+    def items(self) -> list[tuple[str, E]]:
         return list(self._state.items())
 
     def retire(self, e: str, next_k: int) -> None:
