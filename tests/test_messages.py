@@ -1,4 +1,4 @@
-"""The wire format: round trips, every rejection class, fuzzing, reject counting, duplicates."""
+"""The wire format: round trips, every rejection class, fuzzing, reject counting."""
 
 from __future__ import annotations
 
@@ -17,7 +17,6 @@ from tltrack.messages import (
     MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
     REASONS,
-    DuplicateFilter,
     EpisodeEnd,
     EpisodeStart,
     EstimateMsg,
@@ -27,7 +26,6 @@ from tltrack.messages import (
     RejectCounter,
     Transfer,
     Truth,
-    Verdict,
     decode,
     encode,
 )
@@ -479,68 +477,3 @@ def test_reject_counter_is_thread_safe_and_bounded() -> None:
     assert sum(rc.by_key().values()) == 16_000
     assert sum(rc.by_reason().values()) == 16_000
     assert len(rc.by_key()) <= 11 and RejectCounter.OTHER in rc.by_key()
-
-
-# ---- duplicate filter ---------------------------------------------------------------------------
-
-
-def test_duplicate_filter_basic() -> None:
-    f = DuplicateFilter(window=10)
-    assert f.admit("s", "a", 5) is Verdict.NEW
-    assert f.admit("s", "a", 5) is Verdict.DUPLICATE
-    assert f.admit("s", "b", 5) is Verdict.NEW  # another sender, same step
-    assert f.admit("other", "a", 5) is Verdict.NEW  # another stream
-    assert f.admit("s", "a", 3) is Verdict.NEW  # late but inside the window
-    assert f.admit("s", "a", 3) is Verdict.DUPLICATE
-    assert f.admit("s", "a", 6) is Verdict.NEW
-    assert f.latest("s") == 6
-    assert f.admit("s", "a", -4) is Verdict.TOO_OLD  # 6 - 10
-    assert f.admit("s", "a", 16) is Verdict.NEW  # 6 + 10
-    assert f.admit("s", "a", 27) is Verdict.TOO_FAR_AHEAD
-    assert f.admit("s", "a", 6) is Verdict.TOO_OLD  # 16 - 10
-    assert f.admit("s", "a", 7) is Verdict.NEW
-    assert Verdict.NEW.accepted and not Verdict.DUPLICATE.accepted
-
-
-def test_duplicate_filter_replay_of_a_whole_stream() -> None:
-    f = DuplicateFilter(window=32)
-    verdicts = [f.admit("s", "src", k) for k in range(100)]
-    assert all(v is Verdict.NEW for v in verdicts)
-    replay = [f.admit("s", "src", k) for k in range(100)]
-    assert all(v is Verdict.TOO_OLD for v in replay[: 100 - 32])
-    assert all(v is Verdict.DUPLICATE for v in replay[100 - 32 :])
-
-
-def test_duplicate_filter_memory_is_bounded() -> None:
-    f = DuplicateFilter(window=8, max_senders=3, max_streams=5)
-    for k in range(10_000):
-        f.admit("s", "a", k)
-    stream = f._streams["s"]
-    assert len(stream.seen) <= 8
-    assert f.admit("s", "b", 9999) is Verdict.NEW
-    assert f.admit("s", "c", 9999) is Verdict.NEW
-    assert f.admit("s", "d", 9999) is Verdict.OVERFLOW
-    for i in range(100):
-        f.admit(f"stream-{i}", "a", 0)
-    assert len(f) == 5
-    assert f.latest("s") is None  # evicted (least recently used)
-
-
-def test_duplicate_filter_custom_ahead_and_reset() -> None:
-    f = DuplicateFilter(window=100, max_ahead=2)
-    f.admit("s", "a", 0)
-    assert f.admit("s", "a", 3) is Verdict.TOO_FAR_AHEAD
-    assert f.admit("s", "a", 2) is Verdict.NEW
-    f.reset("s")
-    assert f.admit("s", "a", 500) is Verdict.NEW
-    f.reset()
-    assert len(f) == 0
-    with pytest.raises(ValueError):
-        DuplicateFilter(window=0)
-
-
-def test_duplicate_filter_with_messages() -> None:
-    f = DuplicateFilter()
-    m = samples()[0]
-    assert f.admit_msg("k", m) is Verdict.NEW
-    assert f.admit_msg("k", decode(encode(m), Measurement)) is Verdict.DUPLICATE

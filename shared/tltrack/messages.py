@@ -10,16 +10,14 @@ covariances. Its ``reason`` is a short code from :data:`REASONS`, suitable as a 
 On receipt validation is *strict* (no ``"1.5"`` -> 1.5, no ``True`` -> 1); constructing a model
 in code is lax, so a sender may pass NumPy arrays and scalars.
 
-:class:`RejectCounter` counts rejections per key and reason; :class:`DuplicateFilter` drops
-replayed or wildly out-of-window steps with bounded memory.
+:class:`RejectCounter` counts rejections per key and reason. Replays are refused where the
+state lives: a tracker's step queue, the scorer's SQLite keys.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-from collections import OrderedDict
-from enum import StrEnum
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, TypeVar
 
 import msgpack
@@ -457,110 +455,3 @@ class RejectCounter:
                 "by_reason": dict(self._by_reason),
                 "by_key": dict(self._by_key),
             }
-
-
-# ---- duplicate / replay filter ----------------------------------------------------------------
-
-
-class Verdict(StrEnum):
-    """What :meth:`DuplicateFilter.admit` decided."""
-
-    NEW = "new"
-    DUPLICATE = "duplicate"
-    TOO_OLD = "too_old"  # k <= latest - window
-    TOO_FAR_AHEAD = "too_far_ahead"  # k > latest + max_ahead
-    OVERFLOW = "overflow"  # too many senders for one step: refused to bound memory
-
-    @property
-    def accepted(self) -> bool:
-        return self is Verdict.NEW
-
-
-class _Stream:
-    __slots__ = ("latest", "seen")
-
-    def __init__(self) -> None:
-        self.latest: int | None = None
-        self.seen: dict[int, set[str]] = {}
-
-
-class DuplicateFilter:
-    """Remembers accepted ``(k, sender)`` pairs per stream within a sliding window.
-
-    For each stream (typically the key expression), with ``latest`` the largest accepted k:
-
-    - ``k <= latest - window``: TOO_OLD (forgotten, so not distinguishable from a replay);
-    - ``k > latest + max_ahead``: TOO_FAR_AHEAD (a bogus step would otherwise push the window away);
-    - ``(k, sender)`` already accepted: DUPLICATE;
-    - otherwise NEW, and it is remembered.
-
-    The first message of a stream is always NEW. Memory is bounded: at most ``window`` steps times
-    ``max_senders`` senders per stream, and ``max_streams`` streams (least recently used evicted).
-    Thread-safe.
-    """
-
-    def __init__(
-        self,
-        window: int = 64,
-        max_ahead: int | None = None,
-        max_senders: int = 16,
-        max_streams: int = 1024,
-    ) -> None:
-        if window < 1 or max_senders < 1 or max_streams < 1:
-            raise ValueError("window, max_senders and max_streams must be >= 1")
-        self.window = window
-        self.max_ahead = window if max_ahead is None else max_ahead
-        if self.max_ahead < 0:
-            raise ValueError("max_ahead must be >= 0")
-        self.max_senders = max_senders
-        self.max_streams = max_streams
-        self._streams: OrderedDict[str, _Stream] = OrderedDict()
-        self._lock = threading.Lock()
-
-    def admit(self, stream: str, sender: str, k: int) -> Verdict:
-        """Check ``(k, sender)`` on ``stream`` and remember it if NEW."""
-        with self._lock:
-            s = self._streams.get(stream)
-            if s is None:
-                s = self._streams[stream] = _Stream()
-                if len(self._streams) > self.max_streams:
-                    self._streams.popitem(last=False)
-            else:
-                self._streams.move_to_end(stream)
-            if s.latest is not None:
-                if k <= s.latest - self.window:
-                    return Verdict.TOO_OLD
-                if k > s.latest + self.max_ahead:
-                    return Verdict.TOO_FAR_AHEAD
-            senders = s.seen.get(k)
-            if senders is not None and sender in senders:
-                return Verdict.DUPLICATE
-            if senders is not None and len(senders) >= self.max_senders:
-                return Verdict.OVERFLOW
-            s.seen.setdefault(k, set()).add(sender)
-            if s.latest is None or k > s.latest:
-                s.latest = k
-                floor = k - self.window
-                for old in [kk for kk in s.seen if kk <= floor]:
-                    del s.seen[old]
-            return Verdict.NEW
-
-    def admit_msg(self, stream: str, msg: Message) -> Verdict:
-        return self.admit(stream, msg.sender, msg.k)
-
-    def latest(self, stream: str) -> int | None:
-        with self._lock:
-            s = self._streams.get(stream)
-            return None if s is None else s.latest
-
-    def reset(self, stream: str | None = None) -> None:
-        """Forget one stream (e.g. at a new episode), or all of them."""
-        with self._lock:
-            if stream is None:
-                self._streams.clear()
-            else:
-                self._streams.pop(stream, None)
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self._streams)

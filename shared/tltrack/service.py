@@ -26,7 +26,7 @@ from pydantic_settings import BaseSettings
 
 from tltrack import keys
 from tltrack.config import describe_validation_error
-from tltrack.messages import DuplicateFilter, Message, RejectCounter
+from tltrack.messages import Message, RejectCounter
 from tltrack.transport import (
     Publisher,
     Received,
@@ -69,7 +69,6 @@ class Service:
         self.name, self.operator = name, operator
         self.stop = threading.Event()
         self.rejects = RejectCounter()
-        self.duplicates = DuplicateFilter()
         self.counters: dict[str, int] = {}
         self._zenoh = zenoh_settings
         self._subs: list[Subscriber] = []
