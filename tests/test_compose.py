@@ -1,5 +1,7 @@
 """compose.yaml end to end, over real containers: build, `up -d`, five scored episodes, a network
-partition of the source tracker and its healing, and a teardown that leaves nothing behind.
+partition of the source tracker and its healing, three sources, and a teardown that leaves nothing
+behind. The router enforces deploy/zenoh/acl.json5 as compose.yaml ships it; the tests on the host
+connect as the referee, with the demo password that compose.yaml defaults to.
 
 Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
 whichever of `docker compose` and `docker-compose` answers. The image is built with
@@ -25,14 +27,17 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+import zenoh
 from livestack import wait_until
 from tltrack import keys
-from tltrack.transport import ZenohSettings, open_session, query
+from tltrack.demo import IDENTITY, passwords
+from tltrack.transport import Subscriber, ZenohSettings, open_session, query
 
 pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.timeout(900)]
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = ROOT / "compose.yaml"
+PROFILE = ["--profile", "three-sources"]
 IMAGE = os.environ.get("TLTRACK_IMAGE", "tltrack:latest")
 STAMP = ROOT / "build" / "test_compose.stamp"
 
@@ -43,6 +48,27 @@ LEASE_S = 2.0  # TLTRACK_ZENOH_LEASE_MS in compose.yaml
 # the transfer come back (the source's zenoh client retries its router with a backoff).
 PART_STEPS, PART_PACE = 300, 10.0
 PART_EPISODE = "part-r5"
+# The three-source episode (deploy/three-sources.toml, profile three-sources)
+THREE_STEPS = 40
+THREE_EPISODE = "three-r6"
+THREE_WAIT_FOR = [
+    "source/s1:source_tracker",
+    "source/s2:source_tracker",
+    "source/s3:source_tracker",
+    "primary:primary_tracker",
+    "referee:scorer",
+]
+
+USERS = ROOT / "deploy" / "zenoh" / "users.txt"
+#: the identity each service of compose.yaml runs under
+COMPOSE_IDENTITY = {**IDENTITY, "source_tracker_s2": "source-s2", "source_tracker_s3": "source-s3"}
+#: how the host-side tests connect: as the referee (anyone may query the summary)
+HOST_USER = "referee"
+
+
+def credentials(user: str) -> dict[str, Any]:
+    """ZenohSettings fields for connecting as ``user`` with compose.yaml's default password."""
+    return {"username": user, "password": passwords(USERS)[user]}
 
 
 def _run(
@@ -151,6 +177,11 @@ class Stack:
         base = [*self.compose, "-f", str(COMPOSE_FILE), "-p", self.project]
         return _run([*base, *args], env={**self.env, **(env or {})}, timeout=timeout, check=check)
 
+    def run_sim(self, **env: str) -> None:
+        """A fresh sensor_sim with these TLTRACK_SIM_* settings, beside the running services."""
+        sim_env = {f"TLTRACK_SIM_{k.upper()}": v for k, v in env.items()}
+        self.cmd("up", "-d", "--no-deps", "--force-recreate", "sensor_sim", env=sim_env)
+
     def container(self, service: str) -> str:
         """The id of the service's container, running or not (by the labels both tools set)."""
         proc = _run(
@@ -171,6 +202,29 @@ class Stack:
     @property
     def network(self) -> str:
         return f"{self.project}_tracking"
+
+    def health(self) -> dict[str, str]:
+        """service -> its health status (`healthy`, `starting`, ...) for those with a check."""
+        out = {}
+        proc = _run(
+            ["docker", "ps", "-aq", "--filter", f"label=com.docker.compose.project={self.project}"]
+        )
+        for cid in proc.stdout.split():
+            fmt = (
+                '{{index .Config.Labels "com.docker.compose.service"}} '
+                "{{if .State.Health}}{{.State.Health.Status}}{{end}}"
+            )
+            service, _, status = _run(["docker", "inspect", "-f", fmt, cid]).stdout.partition(" ")
+            if status.strip():
+                out[service] = status.strip()
+        return out
+
+    def wait_healthy(self, *services: str, timeout: float = 120) -> bool:
+        """Whether ``services`` all turn healthy within ``timeout`` s (the first check runs one
+        `interval`, 30 s, after a container starts)."""
+        return wait_until(
+            lambda: all(self.health().get(s) == "healthy" for s in services), timeout, every=2.0
+        )
 
     def logs(self, *services: str) -> str:
         return self.cmd("logs", "--no-color", "--timestamps", *services, check=False).stdout
@@ -314,7 +368,8 @@ def stack(
         (logdir / f"{project}.log").write_text(s.logs())
         print(f"{project}: logs in {logdir / (project + '.log')}")
         t0 = time.monotonic()
-        down = s.cmd("down", "-v", "--remove-orphans", "--timeout", "10", check=False)
+        # with the profile, so that `down` also stops the three-source test's extra trackers
+        down = s.cmd(*PROFILE, "down", "-v", "--remove-orphans", "--timeout", "10", check=False)
         left = _remove_leftovers(project)
         print(f"{project}: down -v took {time.monotonic() - t0:.1f} s; leftovers removed: {left}")
         assert down.returncode == 0, f"compose down failed:\n{down.stderr[-3000:]}"
@@ -329,7 +384,9 @@ def wait_for_summary(
     """Poll the scorer's summary until ``done(summary)``; the last summary seen, or None."""
     last: dict[str, Any] | None = None
     deadline = time.monotonic() + timeout
-    settings = ZenohSettings(endpoints=[endpoint], connect_timeout_ms=60_000)
+    settings = ZenohSettings(
+        endpoints=[endpoint], connect_timeout_ms=60_000, **credentials(HOST_USER)
+    )
     with open_session(settings) as session:
         while time.monotonic() < deadline:
             for reply in query(session, keys.SCORER_SUMMARY, 5.0):
@@ -369,6 +426,67 @@ def test_compose_file_is_valid(compose: list[str]) -> None:
     assert proc.returncode == 0
 
 
+def service_env(config: str) -> dict[str, dict[str, str]]:
+    """service -> its environment, read from the block YAML that `compose config` prints (both
+    tools print `environment` as a mapping: services at indent 2, their keys at 4, entries at 6)."""
+    out: dict[str, dict[str, str]] = {}
+    section, service, in_env = "", "", False
+    for line in config.splitlines():
+        text = line.strip()
+        if not text:
+            continue
+        indent = len(line) - len(line.lstrip(" "))
+        if indent == 0:
+            section = text.rstrip(":")
+        elif section != "services":
+            continue
+        elif indent == 2:
+            service, in_env = text.rstrip(":"), False
+            out[service] = {}
+        elif indent == 4:
+            in_env = text == "environment:"
+        elif indent == 6 and in_env:
+            name, _, value = text.partition(":")
+            out[service][name] = value.strip().strip("'\"")
+    return out
+
+
+def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) -> None:
+    """compose.yaml runs every service under its operator's identity with users.txt's password by
+    default (so the two cannot drift apart), the router loads the ACL and that dictionary, and
+    each password can be overridden from the environment."""
+    users = passwords(USERS)
+
+    def config(**env: str) -> dict[str, dict[str, str]]:
+        proc = _run(
+            [*compose, "-f", str(COMPOSE_FILE), *PROFILE, "config"], env={**_clean_env(), **env}
+        )
+        return service_env(proc.stdout)
+
+    env = config()
+    assert env.keys() == {"router", *COMPOSE_IDENTITY}, env.keys()
+    for service, user in COMPOSE_IDENTITY.items():
+        assert env[service].get("TLTRACK_ZENOH_USERNAME") == user, (service, env[service])
+        assert env[service].get("TLTRACK_ZENOH_PASSWORD") == users[user], (service, user)
+        assert "TLTRACK_ZENOH_ACCESS_CONTROL_FILE" not in env[service], service
+    router = env["router"]
+    assert "TLTRACK_ZENOH_USERNAME" not in router, router
+    # the router mounts ./deploy at /config
+    for name, path in (
+        ("ACCESS_CONTROL_FILE", "zenoh/acl.json5"),
+        ("USRPWD_DICTIONARY_FILE", "zenoh/users.txt"),
+    ):
+        assert router.get(f"TLTRACK_ZENOH_{name}") == f"/config/{path}", router
+        assert (ROOT / "deploy" / path).is_file(), path
+
+    def variable(user: str) -> str:
+        return "TLTRACK_PASSWORD_" + user.upper().replace("-", "_")
+
+    overridden = config(**{variable(user): f"not-{user}" for user in users})
+    for service, user in COMPOSE_IDENTITY.items():
+        assert overridden[service]["TLTRACK_ZENOH_PASSWORD"] == f"not-{user}", (service, user)
+
+
 def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
     t0 = time.monotonic()
     summary = wait_for_summary(
@@ -399,35 +517,63 @@ def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
     )
     assert tl < iso, f"TL-PF RMSE {tl:.2f} m is not below the isolated PF's {iso:.2f} m"
     assert filters["tl-pf"]["steps_with_transfer"] > EPISODES * (STEPS - 1) // 2, filters["tl-pf"]
+    # every health check passes: each looks up its service's own liveliness token under the
+    # service's identity, which the ACL grants (and nothing more)
+    checked = ("router", "scorer", "primary_tracker", "source_tracker", "dashboard")
+    assert stack.wait_healthy(*checked), stack.health()
+
+
+def test_the_router_refuses_sessions_without_a_valid_password(stack: Stack) -> None:
+    """compose.yaml's router authenticates every session (the ACL's identities)."""
+    # the router is up and takes a known identity ...
+    known = ZenohSettings(
+        endpoints=[stack.endpoint], connect_timeout_ms=60_000, **credentials(HOST_USER)
+    )
+    with open_session(known) as z:
+        assert z.info.routers_zid()
+    # ... but neither a session without credentials nor a wrong password
+    for creds in ({}, {"username": "primary", "password": "guess"}):
+        with pytest.raises(zenoh.ZError):
+            open_session(
+                ZenohSettings(endpoints=[stack.endpoint], connect_timeout_ms=2000, **creds)
+            )
 
 
 def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack) -> None:
     # Let the first test's episodes finish first (sensor_sim runs them in one container).
     wait_for_summary(stack.endpoint, lambda s: len(scored(s, "main-")) >= EPISODES, timeout=300)
-    stack.cmd(
-        "up",
-        "-d",
-        "--no-deps",
-        "--force-recreate",
-        "sensor_sim",
-        env={
-            "TLTRACK_SIM_EPISODES": "1",
-            "TLTRACK_SIM_FIRST_RUN": "5",
-            "TLTRACK_SIM_EPISODE_PREFIX": "part",
-            "TLTRACK_SIM_STEPS": str(PART_STEPS),
-            "TLTRACK_SIM_PACE": str(PART_PACE),
-        },
+    # The ACL is on: a session as the primary reads the primary's sensor, and (another session,
+    # so the two subscriptions cannot share samples) never the source's.
+    primary = ZenohSettings(
+        endpoints=[stack.endpoint], connect_timeout_ms=60_000, **credentials("primary")
     )
+    with (
+        open_session(primary) as own,
+        open_session(primary) as other,
+        Subscriber(own, keys.PRIMARY_MEAS) as own_meas,
+        Subscriber(other, keys.SOURCE_MEAS) as source_meas,
+    ):
+        stack.run_sim(
+            episodes="1",
+            first_run="5",
+            episode_prefix="part",
+            steps=str(PART_STEPS),
+            pace=str(PART_PACE),
+        )
+
+        # 1. the transfer works before the cut
+        def transfers_flowing() -> bool:
+            tl = stack.steps(PART_EPISODE, "tl-pf")
+            return sum(used for used, _, _ in tl.values()) >= 20
+
+        assert wait_until(transfers_flowing, 120, every=0.5), (
+            "no transfer before the cut\n" + stack.logs()[-6000:]
+        )
+        seen = {"primary": own_meas.received, "source": source_meas.received}
+    print(f"measurements received by a session as the primary: {seen}")
+    assert seen["primary"] >= 20, seen
+    assert seen["source"] == 0, f"the primary's identity read the source's measurements: {seen}"
     source = stack.container("source_tracker")
-
-    # 1. the transfer works before the cut
-    def transfers_flowing() -> bool:
-        tl = stack.steps(PART_EPISODE, "tl-pf")
-        return sum(used for used, _, _ in tl.values()) >= 20
-
-    assert wait_until(transfers_flowing, 120, every=0.5), (
-        "no transfer before the cut\n" + stack.logs()[-6000:]
-    )
 
     # 2. cut the source tracker off the network, for a few lease times
     t_cut = time.time()
@@ -483,3 +629,53 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
         f"transfer back at k={after[0]}, {tl[after[0]][1] - t_heal:.1f} s after reconnecting; "
         f"{len(after)} steps with transfer after it"
     )
+
+
+def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
+    """README, "Three source operators": the profile's trackers join the running stack under their
+    own identities (source-s2, source-s3), and one episode of deploy/three-sources.toml is scored
+    with the three sources' tracks and TL-PF using their transfers, nothing rejected."""
+    before = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "part-")), timeout=300)
+    assert before is not None, "the scorer never answered"
+    # what the services rejected so far (the partition may leave a few late messages)
+    rejected_before = before["messages"]["rejected"]
+    print(f"rejected before the three-source episode: {rejected_before}")
+    stack.cmd(*PROFILE, "up", "-d", "--no-deps", "source_tracker_s2", "source_tracker_s3")
+    stack.run_sim(
+        config="/config/three-sources.toml",
+        wait_for=json.dumps(THREE_WAIT_FOR),
+        episodes="1",
+        first_run="6",
+        episode_prefix="three",
+        steps=str(THREE_STEPS),
+    )
+    summary = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "three-")), timeout=240)
+    logs = condensed(stack.logs("sensor_sim", "primary_tracker", "source_tracker_s2"))
+    assert summary is not None and scored(summary, "three-"), "not scored\n" + logs
+    (episode,) = scored(summary, "three-")
+    assert episode["episode"] == THREE_EPISODE and episode["complete"], episode
+    counts = {
+        name: (int(n), int(used))
+        for name, n, used in stack.sql(
+            "SELECT filter, count(*), sum(transfer_used) FROM estimates WHERE episode = ? "
+            "GROUP BY filter",
+            THREE_EPISODE,
+        )
+    }
+    print(f"three sources, (estimates, with transfer) per filter: {counts}")
+    for sid in ("s1", "s2", "s3"):
+        assert counts.get(f"source-pf/{sid}", (0, 0))[0] == THREE_STEPS, (sid, counts)
+    assert counts["pf"][0] == counts["tl-pf"][0] == THREE_STEPS, counts
+    assert counts["tl-pf"][1] > THREE_STEPS // 2, counts
+    # nothing rejected during this episode (each counter counts since its service started)
+    rejected = summary["messages"]["rejected"]
+    new = {
+        (service, reason): n - rejected_before.get(service, {}).get(reason, 0)
+        for service, reasons in rejected.items()
+        for reason, n in reasons.items()
+    }
+    assert not {k: n for k, n in new.items() if n > 0}, (rejected_before, rejected)
+    assert rejected.get("source/s2/source_tracker") == {}, rejected
+    assert rejected.get("source/s3/source_tracker") == {}, rejected
+    # their health checks (own liveliness token, under their own identity) pass under the ACL
+    assert stack.wait_healthy("source_tracker_s2", "source_tracker_s3"), stack.health()

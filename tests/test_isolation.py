@@ -66,6 +66,11 @@ READS: dict[str, tuple[list[str], list[str]]] = {
         [keys.source_meas("s1", keys.ANY), keys.EPISODES],
         [keys.PRIMARY_MEAS, keys.PRIMARY_ESTIMATES, keys.TRUTHS, "tltrack/primary/**", keys.ALL],
     ),
+    # another source operator (not in this episode's config): nothing of s1 or of the primary
+    "source-s2": (
+        [keys.EPISODES],
+        [keys.source_meas("s1", keys.ANY), "tltrack/source/s1/**", keys.TRANSFERS, keys.ALL],
+    ),
     "referee": (
         [keys.TRUTHS, keys.SOURCE_ESTIMATES, keys.PRIMARY_ESTIMATES, f"{keys.ROOT}/**/stats/*"],
         [keys.PRIMARY_MEAS, keys.SOURCE_MEAS, keys.ALL],
@@ -120,16 +125,22 @@ def test_each_operator_reads_only_what_the_acl_grants(tmp_path: Path) -> None:
             )
             for k in range(1, K)
         ]
-        for user in ("primary", "referee", "sensor"):
+        for user in ("primary", "referee", "sensor", "source-s2"):
             with session(s.endpoint, user) as forger:
                 for payload in forged:
                     forger.put(keys.transfer("s1", E), payload)
                 forger.put("tltrack/source/*/transfer/*", forged[-1])
-        # Liveliness: the primary may see the sources' trackers, the source sees nobody.
+        # Liveliness: the primary may see the sources' trackers, the source sees nobody; each
+        # may look up its own token (compose.yaml's health check), nothing wider.
         alive_src = keys.alive("source/s1", "source_tracker")
+        alive_primary = keys.alive("primary", "primary_tracker")
         assert _liveliness(z["primary"], keys.alive("source/*", "source_tracker")) == {alive_src}
         assert _liveliness(z["primary"], keys.ALIVE) == set()
+        assert _liveliness(z["primary"], alive_primary) == {alive_primary}
         assert _liveliness(z["source-s1"], keys.ALIVE) == set()
+        assert _liveliness(z["source-s1"], alive_src) == {alive_src}
+        assert _liveliness(z["source-s2"], alive_src) == set()
+        assert _liveliness(z["source-s2"], keys.alive("source/*", "source_tracker")) == set()
         assert alive_src in _liveliness(z["sensor"], keys.ALIVE)
         assert s.wait("sensor_sim", 90) == 0, logs(s)
         scored = wait_for_scored(s.endpoint, 1, 60)
@@ -312,6 +323,8 @@ def test_every_identity_has_credentials_and_a_policy() -> None:
     users = set(passwords())
     named = {u for s_ in acl["subjects"] for u in s_["usernames"] or []}
     certified = {u for s_ in acl["subjects"] for u in s_["cert_common_names"] or []}
-    assert named == certified == users == set(IDENTITY.values())
+    # the demo's services, and the two more sources of compose.yaml's profile three-sources
+    operators = set(IDENTITY.values()) | {"source-s2", "source-s3"}
+    assert named == certified == users == operators
     in_policy = {s_ for p in acl["policies"] for s_ in p["subjects"]}
     assert in_policy == {s_["id"] for s_ in acl["subjects"]}
