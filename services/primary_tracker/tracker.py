@@ -172,11 +172,13 @@ class PrimaryTracker:
         t0 = time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
-        used = bool(transfers)
+        used = ep.tracker.used_transfer
         self._publish(e, "tl", ep.tracker.tl_name, k, t_sensor, tl, used, step_ms)
         self._publish(e, "isolated", ep.tracker.iso_name, k, t_sensor, iso, False, step_ms)
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
+        if ep.tracker.rolled_back:
+            self.svc.count("rollbacks_to_isolated")
 
     def _publish(
         self,

@@ -9,6 +9,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar
 
@@ -49,7 +50,8 @@ def measurement(cfg: Config, msg: Measurement, sensor_id: str) -> Observation:
 
 def transfer(cfg: Config, msg: Transfer, source_id: str) -> Observation:
     """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor."""
-    return Observation.broadcast(sensor(cfg, source_id), np.asarray(msg.eta), np.asarray(msg.P_eta))
+    obs = Observation.broadcast(sensor(cfg, source_id), np.asarray(msg.eta), np.asarray(msg.P_eta))
+    return dataclasses.replace(obs, origin=source_id)
 
 
 def wire_covariance(P: np.ndarray) -> np.ndarray:
@@ -85,18 +87,22 @@ class PrimaryEpisode:
     """Algorithm 2 for one episode, with an isolated twin run alongside for comparison.
 
     ``robust`` makes it ``robust-tl-<kind>``: transfers are first judged for consistency (and the
-    config's budget), exactly as the engine's filter of that name.
+    config's budget), exactly as the engine's filter of that name; its isolated twin is then the
+    one it rolls back to.
     """
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
         policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget) if robust else None
-        self.tl = Primary(
-            _filter(cfg, self.tl_name, run), policy, recovery(parse(self.tl_name), cfg)
-        )
         self.iso = Primary(
             _filter(cfg, self.iso_name, run), None, recovery(parse(self.iso_name), cfg)
+        )
+        self.tl = Primary(
+            _filter(cfg, self.tl_name, run),
+            policy,
+            recovery(parse(self.tl_name), cfg),
+            twin=self.iso if robust else None,
         )
 
     def step(
@@ -110,7 +116,20 @@ class PrimaryEpisode:
         extra = [
             transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources if s.id in transfers
         ]  # the engine's order
-        return self.tl.step(obs, extra), self.iso.step(obs)
+        tl = self.tl.step(obs, extra)
+        if self.tl.twin is not None and self.tl.twin_estimate is not None:
+            return tl, self.tl.twin_estimate  # the twin stepped inside the robust primary
+        return tl, self.iso.step(obs)
+
+    @property
+    def used_transfer(self) -> bool:
+        """Did the last TL step use a transfer (a robust primary may have judged it out)?"""
+        return self.tl.used is not None and bool(self.tl.used.any())
+
+    @property
+    def rolled_back(self) -> bool:
+        """Did the last step roll the robust primary back to its isolated twin?"""
+        return self.tl.rolled_back is not None and bool(self.tl.rolled_back.any())
 
 
 class StepQueue(Generic[T]):

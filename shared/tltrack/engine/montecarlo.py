@@ -153,10 +153,12 @@ def run_batch(
                 if spec.role == "robust"
                 else None
             )
-            primaries[spec.name] = (
-                spec,
-                Primary(build(spec, cfg, model, x0_hat, runs), policy, recovery(spec, cfg)),
-            )
+            filt = build(spec, cfg, model, x0_hat, runs)
+            twin = None
+            if spec.role == "robust":  # its isolated twin, on the same random numbers
+                iso = build(parse(spec.kind), cfg, model, x0_hat, runs)
+                twin = Primary(iso, None, recovery(spec, cfg))
+            primaries[spec.name] = (spec, Primary(filt, policy, recovery(spec, cfg), twin))
             scores[spec.name] = _Score(K, keep_tracks)
 
     lag = {sid: transfer_lag(cfg, sid) for sid in source_ids}

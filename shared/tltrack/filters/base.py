@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, Self
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,3 +37,6 @@ class Filter(Protocol):
 
     def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
         """Moments of eta = h(x) + w under the current (predicted) state density."""
+
+    def adopt(self, other: Self, runs: NDArray[np.bool_]) -> None:
+        """Take ``other``'s posterior for ``runs``: forget what only this filter was told."""

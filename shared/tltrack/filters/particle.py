@@ -278,6 +278,12 @@ class ParticleFilter:
             kernels.moments(_f64(self._cloud()), mean, cov)
         return Estimate(mean.copy(), cov + self.model.Q)
 
+    def adopt(self, other: ParticleFilter, runs: NDArray[np.bool_]) -> None:
+        """``other``'s cloud for ``runs`` (the robust TL's rollback to its isolated twin)."""
+        x = np.array(self.x)
+        x[:, runs, :] = other.x[:, runs, :]
+        self.x = x
+
     def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
         """eta_hat and P_eta_eta from the propagated cloud (seed eqs. BTL_sr_pred_obser_mean/cov).
 

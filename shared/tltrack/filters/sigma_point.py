@@ -220,6 +220,11 @@ class SigmaPointFilter:
         """The Gaussian posterior itself: its mean and covariance."""
         return Estimate(self.m.T.copy(), self.P.copy())
 
+    def adopt(self, other: SigmaPointFilter, runs: NDArray[np.bool_]) -> None:
+        """``other``'s (m, P) for ``runs`` (the robust TL's rollback to its isolated twin)."""
+        self.m[:, runs] = other.m[:, runs]
+        self.P[runs] = other.P[runs]
+
     def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
         """eta_hat = E[h(x)] and P_eta_eta = Cov[h(x)] + R under the current density: a transfer."""
         runs = np.arange(self.m.shape[1])

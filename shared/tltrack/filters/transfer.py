@@ -59,17 +59,30 @@ class Primary:
 
     With a :class:`~tltrack.filters.decision.TransferPolicy` the primary first decides, per run,
     which transfers to use (robust TL). :attr:`used` tells, per run, whether the last step used one.
+    A robust primary also steps an isolated ``twin`` (a filter of the same kind on z alone, best
+    with the same random numbers) and rolls the runs the policy says to :attr:`forget
+    <tltrack.filters.decision.TransferPolicy.forget>` back to it, so a source found out late
+    leaves no lasting harm.
     """
 
     def __init__(
-        self, filt: Filter, policy: TransferPolicy | None = None, recover: Recover | None = None
+        self,
+        filt: Filter,
+        policy: TransferPolicy | None = None,
+        recover: Recover | None = None,
+        twin: Primary | None = None,
     ) -> None:
         self.filter = filt
         self.policy = policy
         self.recover = recover
+        self.twin = twin
         self.used: NDArray[np.bool_] | None = None
+        self.rolled_back: NDArray[np.bool_] | None = None  #: per run, by the last step
+        self.twin_estimate: Estimate | None = None
 
     def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
+        if self.twin is not None:
+            self.twin_estimate = self.twin.step(z)
         self.filter.predict()
         if self.recover is not None and z is not None:
             self.recover(self.filter, z)
@@ -79,6 +92,11 @@ class Primary:
         observations = [*([z] if z is not None else []), *transfers]
         if observations:
             self.filter.update(observations)
+        self.rolled_back = None
+        if self.policy is not None and transfers and self.twin is not None:
+            self.rolled_back = self.policy.forget
+            if self.rolled_back.any():
+                self.filter.adopt(self.twin.filter, self.rolled_back)
         return self.filter.estimate()
 
 

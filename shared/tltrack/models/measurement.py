@@ -75,6 +75,14 @@ class RangeBearing:
         J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1] = c, -r * s, s, r * c
         return pos, J @ P @ J.transpose(0, 2, 1)
 
+    def from_position(self, z: Array, S: Array) -> Array:
+        """A Cartesian covariance S (B, 2, 2) seen at z (2, B) in this sensor's (range, bearing)."""
+        r, b = z[0], z[BEARING]
+        c, s = np.cos(b), np.sin(b)
+        Jinv = np.empty((r.shape[0], 2, 2))
+        Jinv[:, 0, 0], Jinv[:, 0, 1], Jinv[:, 1, 0], Jinv[:, 1, 1] = c, s, -s / r, c / r
+        return Jinv @ S @ Jinv.transpose(0, 2, 1)
+
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat with the bearing wrapped; measurement components on the first axis."""
         d = np.asarray(z, dtype=float) - zhat

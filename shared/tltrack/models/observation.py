@@ -23,13 +23,15 @@ class Observation:
     """N(mean; h(x), cov) for a batch: ``mean`` is (n_z, B), ``cov`` is (B, n_z, n_z).
 
     ``mask`` (B,) marks the runs the statement applies to; a run without it is left untouched,
-    which is how a missing transfer becomes an isolated step for that run alone.
+    which is how a missing transfer becomes an isolated step for that run alone. ``origin`` names
+    the source operator of a transfer, so that its record follows it whichever others arrive.
     """
 
     sensor: RangeBearing
     mean: Array
     cov: Array
     mask: NDArray[np.bool_] | None = None
+    origin: str | None = None
 
     @classmethod
     def broadcast(cls, sensor: RangeBearing, mean: Array, cov: Array) -> Observation:
