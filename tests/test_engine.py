@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.engine import results
-from tltrack.engine.montecarlo import run_experiment, trace_run
+from tltrack.engine.montecarlo import run_experiment, run_sweep, trace_run
 from tltrack.engine.scenario import simulate, truth
 
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
@@ -90,3 +90,22 @@ def test_lost_fraction_counts_runs_far_off_at_the_end():
     assert run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"].lost_fraction == 1.0
     cfg = _cfg(lost_threshold_m=1e6)
     assert run_experiment(cfg, ["pf"], workers=1, time_steps=False)["pf"].lost_fraction == 0.0
+
+
+def test_a_sweep_over_the_primary_intensity_equals_separate_experiments():
+    """The sources run once for the whole sweep; every configuration's numbers are unchanged."""
+    cfgs = [_cfg(primary_intensity=i) for i in (1, 4, 8)]
+    names = ["pf", "tl-pf", "tl-ukf", "fusion-pf"]
+    swept = run_sweep(cfgs, names, batch_size=4, workers=1, time_steps=False)
+    for cfg, res in zip(cfgs, swept, strict=True):
+        alone = run_experiment(cfg, names, batch_size=4, workers=1, time_steps=False)
+        assert res.keys() == alone.keys()
+        for name in alone:
+            assert res[name].run_mse == alone[name].run_mse, name
+            assert res[name].transfer_rate == alone[name].transfer_rate, name
+    assert swept[0]["pf"].run_mse != swept[2]["pf"].run_mse  # the intensity did change
+
+
+def test_a_sweep_refuses_configurations_that_differ_beyond_the_primary():
+    with pytest.raises(ValueError, match="particles"):
+        run_sweep([_cfg(), _cfg(particles=300)], ["tl-pf"], workers=1)

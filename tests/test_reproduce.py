@@ -27,3 +27,30 @@ def test_reproduce_writes_every_table_and_figure(tmp_path):
     ):
         assert (tmp_path / f"{png}.png").stat().st_size > 10_000
     assert "16.7473" in report  # the paper's number stands beside ours
+
+
+def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
+    from tltrack import reproduce as rep
+    from tltrack.config import make_config
+    from tltrack.engine.montecarlo import run_experiment
+
+    base = rep.base_config("arasaratnam-haykin", "noise-free", runs=3, seed=1)
+    groups = rep.sweeps(rep.jobs(base) + rep.loss_jobs(base))
+    labels = [[j.label for j in g] for g in groups]
+    assert [f"s2_ip{i}" for i in rep.INTENSITIES] + ["loss_arasaratnam-haykin_noise-free"] in labels
+    assert len(groups) == 1 + 1 + 3 + 5  # s1, the I_p sweep, three other N, five other losses
+
+    cfg = make_config(preset="arasaratnam-haykin", K=8, particles=100, runs=3, seed=2)
+    todo = [
+        rep.Job("a", cfg.with_(primary_intensity=2), ["pf", "tl-pf", "tl-ukf"]),
+        rep.Job("b", cfg, ["pf", "tl-pf", "tl-ukf"]),
+        rep.Job("dup", cfg, ["tl-pf"]),
+    ]
+    docs = rep.run_all(todo, tmp_path, workers=1)
+    assert set(docs["dup"]["filters"]) == {"source-pf", "tl-pf"}
+    dup, b = docs["dup"]["filters"]["tl-pf"], docs["b"]["filters"]["tl-pf"]
+    assert dup["rmse_per_step"] == b["rmse_per_step"]
+    alone = run_experiment(todo[0].cfg, todo[0].filters, workers=1, time_steps=False)
+    for name, r in alone.items():
+        assert docs["a"]["filters"][name]["rmse_per_step"] == r.rmse_per_step, name
+    assert rep.wall_minutes(docs) == docs["a"]["wall_s"] / 60  # one sweep, counted once
