@@ -1,4 +1,5 @@
 import json
+import re
 
 import pytest
 from tltrack.cli import app
@@ -63,3 +64,15 @@ def test_bad_options_are_refused_naming_the_field(tmp_path, args, needle):
 def test_help_has_examples():
     r = runner.invoke(app, ["experiment", "--help"])
     assert r.exit_code == 0 and "Examples" in r.output
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["robust", "sources", "budget"])
+def test_each_study_writes_its_table_with_paired_differences(tmp_path, name):
+    r = CliRunner().invoke(app, ["study", name, "--runs", "3", "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    text = (tmp_path / f"{name}.md").read_text()
+    rows = [ln for ln in text.splitlines() if ln.startswith("| ") and "---" not in ln]
+    assert len(rows) >= 5, text  # a header and a row per configuration
+    if name != "budget":
+        assert re.search(r"[+-]\d+\.\d{3} \(\d+\.\d{3}\)", text), text  # difference (MC error)

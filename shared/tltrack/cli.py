@@ -326,6 +326,7 @@ def study(
     name: Annotated[str, typer.Argument(help="robust, sources or budget")],
     runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/studies"),
+    seed: Annotated[int, typer.Option(help="master seed (the design was tuned on 1)")] = 0,
 ) -> None:
     """Faulty sources (robust), several sources, or the communication budget: markdown + plots."""
     from tltrack import studies
@@ -336,7 +337,7 @@ def study(
         raise typer.Exit(2)
     with progress_bar(runs, name) as bar:
         task = bar.add_task(name, total=None)
-        path = runner[name](runs, out, progress=lambda n: bar.advance(task, n))
+        path = runner[name](runs, out, progress=lambda n: bar.advance(task, n), seed=seed)
     console.print(Path(path).read_text())
     console.print(f"wrote {path}")
 

@@ -40,32 +40,37 @@ def base(runs: int, seed: int = 0) -> Config:
     )
 
 
-def mc_error(a: FilterResult, b: FilterResult) -> float:
-    """Twice the standard error of the paired per-run difference (see the module docstring)."""
+def paired(a: FilterResult, b: FilterResult) -> str:
+    """``"+x.xx (e.ee)"``: the mean over runs of the per-run overall-RMSE difference a - b, and its
+    Monte-Carlo error, twice the standard error (see the module docstring)."""
     d = np.sqrt(a.run_mse) - np.sqrt(b.run_mse)
-    return float(2.0 * d.std(ddof=1) / np.sqrt(len(d)))
+    return f"{d.mean():+.3f} ({2.0 * d.std(ddof=1) / np.sqrt(len(d)):.3f})"
 
 
 def _row(cells: list[Any]) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
 
-def robust(runs: int, out: Path, progress: Progress = None) -> Path:
+def robust(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
     """pf, tl-pf and robust-tl-pf against an honest, biased, diverged and stale source."""
     res = {
         f: run_experiment(
-            base(runs).with_(sources=[{"id": "s1", "fault": f}]),
+            base(runs, seed).with_(sources=[{"id": "s1", "fault": f}]),
             ["pf", "tl-pf", "robust-tl-pf"],
             progress=progress,
         )
         for f in FAULTS
     }
-    gain = {f: r["pf"].rmse_overall - r["tl-pf"].rmse_overall for f, r in res.items()}
+
+    def gain(r: FilterResult, iso: FilterResult) -> float:  # mean per-run RMSE gain over iso
+        return float(np.mean(np.sqrt(iso.run_mse) - np.sqrt(r.run_mse)))
+
     lines = [
         "# Robust transfer against faulty sources",
         "",
-        f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs. "
-        "MC error = 2 x SE of the paired per-run difference.",
+        f"`arasaratnam-haykin`, noise-free truth, I_p = 4, N = 3000, {runs} runs, seed {seed}. "
+        "Differences are means over runs of the paired per-run overall RMSE difference; "
+        "MC error = 2 x SE of that difference.",
         "",
         _row(
             [
@@ -83,7 +88,7 @@ def robust(runs: int, out: Path, progress: Progress = None) -> Path:
     ]
     for f, r in res.items():
         iso, tl, rob = r["pf"], r["tl-pf"], r["robust-tl-pf"]
-        share = ((iso.rmse_overall - rob.rmse_overall) / gain[f]) if f == "none" else None
+        share = gain(rob, iso) / gain(tl, iso) if f == "none" else None
         lines.append(
             _row(
                 [
@@ -91,7 +96,7 @@ def robust(runs: int, out: Path, progress: Progress = None) -> Path:
                     f"{iso.rmse_overall:.2f}",
                     f"{tl.rmse_overall:.2f}",
                     f"{rob.rmse_overall:.2f}",
-                    f"{rob.rmse_overall - iso.rmse_overall:+.2f} ({mc_error(rob, iso):.2f})",
+                    paired(rob, iso),
                     "–" if share is None else f"{share:.1%}",
                     f"{rob.transfer_rate:.1%}",
                     f"{iso.lost_fraction:.0%} / {tl.lost_fraction:.0%} / {rob.lost_fraction:.0%}",
@@ -101,7 +106,7 @@ def robust(runs: int, out: Path, progress: Progress = None) -> Path:
     return _write(out, "robust", lines, {f: _plain(r) for f, r in res.items()})
 
 
-def sources(runs: int, out: Path, progress: Progress = None) -> Path:
+def sources(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
     """The primary's RMSE against the number of sources, honest or with one biased among them."""
     filters = ["pf", "tl-pf", "robust-tl-pf", "fusion-pf"]
     setups: dict[str, list[dict[str, Any]]] = {
@@ -114,7 +119,7 @@ def sources(runs: int, out: Path, progress: Progress = None) -> Path:
     }
     res, bounds = {}, {}
     for label, srcs in setups.items():
-        cfg = base(runs).with_(sources=srcs)
+        cfg = base(runs, seed).with_(sources=srcs)
         res[label] = run_experiment(cfg, filters, progress=progress)
         bounds[label] = float(np.mean(_bound_all(cfg)))
     one, two = res["1 honest"]["tl-pf"], res["2 honest"]["tl-pf"]
@@ -136,13 +141,11 @@ def sources(runs: int, out: Path, progress: Progress = None) -> Path:
         "",
         "Checks (difference, MC error):",
         "",
-        f"- 2 honest vs 1 honest, tl-pf: {two.rmse_overall - one.rmse_overall:+.2f} "
-        f"({mc_error(two, one):.2f})",
+        f"- 2 honest vs 1 honest, tl-pf: {paired(two, one)}",
         f"- 1 honest + 1 biased, robust-tl-pf vs isolated pf: "
-        f"{mixed.rmse_overall - res['1 honest + 1 biased']['pf'].rmse_overall:+.2f} "
-        f"({mc_error(mixed, res['1 honest + 1 biased']['pf']):.2f})",
+        f"{paired(mixed, res['1 honest + 1 biased']['pf'])}",
         f"- 1 honest + 1 biased, robust-tl-pf vs tl-pf with the honest source alone: "
-        f"{mixed.rmse_overall - one.rmse_overall:+.2f} ({mc_error(mixed, one):.2f})",
+        f"{paired(mixed, one)}",
     ]
     labels = list(res)
     plots.curves(
@@ -156,11 +159,11 @@ def sources(runs: int, out: Path, progress: Progress = None) -> Path:
     return _write(out, "sources", lines, {lb: _plain(r) for lb, r in res.items()})
 
 
-def budget(runs: int, out: Path, progress: Progress = None) -> Path:
+def budget(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
     """RMSE against the share of steps with a transfer (the hybrid primary's budget)."""
     res = {
         b: run_experiment(
-            base(runs).with_(transfer_budget=b), ["pf", "robust-tl-pf"], progress=progress
+            base(runs, seed).with_(transfer_budget=b), ["pf", "robust-tl-pf"], progress=progress
         )
         for b in BUDGETS
     }
