@@ -382,7 +382,8 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
     alive = {x["name"] for x in snap["services"] if x["alive"]}
     everyone = {"primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"}
     assert everyone | {"referee/dashboard"} <= alive
-    for svc in alive:
+    # sensor_sim has exited, and its token's end may reach the page between the two reads
+    for svc in everyone | {"referee/dashboard"}:
         assert value(m, "tltrack_service_up", service=svc) == 1
     assert snap["rejected"]["total"] >= 3 * len(GARBAGE)
 

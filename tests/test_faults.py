@@ -268,11 +268,16 @@ def test_router_dies_and_returns(tmp_path: Path) -> None:
         assert all(s.procs[name].poll() is None for name in services), logs(s)
     tl = stored(db, E1, "tl-pf")
     received = sorted(k for (k,) in rows(db, "SELECT k FROM truth WHERE episode = ?", E1))
-    assert sorted(tl) == received, "the trackers missed steps that did arrive"
+    # While the router restarts the services reconnect one after another, so a step may reach
+    # the scorer and not the primary; before the kill and once everyone is back, none may.
+    before = [k for k in received if k <= killed_at]
+    assert all(k in tl for k in before), "the primary missed steps that did arrive"
     # steps sensed once everyone was back (the truth has the sensor's clock; the steps that
     # were never received are stamped when the trackers gave up on them)
     sensed = rows(db, "SELECT k FROM truth WHERE episode = ? AND t_sensor > ?", E1, t_back + 1)
     resumed = sorted(k for (k,) in sensed)
-    assert resumed and all(tl[k][1] for k in resumed), "no transfer after the router came back"
+    assert resumed, "no step was sensed after the router came back"
+    assert all(k in tl for k in resumed), "the primary missed steps after the router came back"
+    assert all(tl[k][1] for k in resumed), "no transfer after the router came back"
     assert len(rows(db, "SELECT k FROM truth")) < K, "no step was lost: the router was not down"
     assert_genuine(db, E1, FIRST_RUN, K, ("pf", "source-pf"), upto=killed_at)

