@@ -17,7 +17,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -193,7 +193,8 @@ def run_sweep_batch(
             label = reported_name(parse(name), sid, len(source_ids))
             _tick(source_scores[label], timing, t0)
             source_scores[label].add(k, est, truth[k])
-            made[name, sid][k + 1] = transfer  # made at k, applies at k_apply = k + 1
+            # made at k, applies at k_apply = k + 1; named by its source, as a live one is
+            made[name, sid][k + 1] = replace(transfer, origin=sid)
             made[name, sid].pop(k - lag[sid] - 1, None)
 
         def transfers(spec: FilterSpec, k: int = k) -> list[Observation]:
