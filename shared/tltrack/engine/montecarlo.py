@@ -383,8 +383,9 @@ def run_sweep(
             for fut, n in futures:
                 absorb(fut.result(), n)
     if time_steps:
-        for c, total in zip(cfgs, totals, strict=True):
-            for name, s in run_batch(c, names, [0], timing=True).items():
+        timed = run_sweep_batch(cfgs, names, [0], timing=True)
+        for total, part in zip(totals, timed, strict=True):
+            for name, s in part.items():
                 total[name].step_ms = s.step_ms
     return [
         {
