@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tltrack import plots
 from tltrack.config import Config, make_config
@@ -40,10 +41,15 @@ def base(runs: int, seed: int = 0) -> Config:
     )
 
 
+def run_difference(a: FilterResult, b: FilterResult) -> NDArray[np.float64]:
+    """Per run, the overall RMSE of a minus that of b: the paired comparison's samples."""
+    return np.sqrt(a.run_mse) - np.sqrt(b.run_mse)
+
+
 def paired(a: FilterResult, b: FilterResult) -> str:
     """``"+x.xx (e.ee)"``: the mean over runs of the per-run overall-RMSE difference a - b, and its
     Monte-Carlo error, twice the standard error (see the module docstring)."""
-    d = np.sqrt(a.run_mse) - np.sqrt(b.run_mse)
+    d = run_difference(a, b)
     return f"{d.mean():+.3f} ({2.0 * d.std(ddof=1) / np.sqrt(len(d)):.3f})"
 
 
@@ -61,9 +67,6 @@ def robust(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Pa
         )
         for f in FAULTS
     }
-
-    def gain(r: FilterResult, iso: FilterResult) -> float:  # mean per-run RMSE gain over iso
-        return float(np.mean(np.sqrt(iso.run_mse) - np.sqrt(r.run_mse)))
 
     lines = [
         "# Robust transfer against faulty sources",
@@ -88,7 +91,11 @@ def robust(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Pa
     ]
     for f, r in res.items():
         iso, tl, rob = r["pf"], r["tl-pf"], r["robust-tl-pf"]
-        share = gain(rob, iso) / gain(tl, iso) if f == "none" else None
+        share = (
+            run_difference(iso, rob).mean() / run_difference(iso, tl).mean()
+            if f == "none"
+            else None
+        )
         lines.append(
             _row(
                 [
