@@ -1,5 +1,5 @@
 # One image for every tltrack service; compose chooses the command of each container
-# (`python -m services.<name>` or `tltrack <subcommand>`).
+# (`python -m tltrack.services.<name>` or `tltrack <subcommand>`).
 #
 # The build needs no network: scripts/build_image.sh builds the wheels on the host into build/wheels/
 # (deps/ = pinned dependencies, app/ = tltrack itself) and this file installs them with --no-index.
@@ -57,7 +57,7 @@ COPY build/wheels/app/ /tmp/app/
 # trackers start in seconds instead of compiling at every start.
 RUN pip install --no-index --no-deps /tmp/app/*.whl \
  && rm -rf /tmp/app \
- && python -c "import services; from tltrack.filters.particle import warm_up; warm_up()"
+ && python -c "import tltrack.services; from tltrack.filters.particle import warm_up; warm_up()"
 
 # /data holds the scorer's SQLite database; mount a named volume there (a new named volume
 # inherits the owner tltrack from this directory).

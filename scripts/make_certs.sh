@@ -10,7 +10,7 @@
 #                     ROUTER_HOST (a DNS name or an IP address the clients connect to)
 #   NAME.pem/.key     one client certificate per identity in $TLTRACK_CERT_NAMES (default
 #                     "sensor referee primary source-s1 dashboard"), common name = NAME: with
-#                     mutual TLS the router's ACL (deploy/zenoh/acl.json5) knows the operator by it
+#                     mutual TLS the router's ACL (shared/tltrack/access/acl.json5) knows the operator by it
 #
 # Run it again with the same OUT_DIR to issue more certificates (e.g. TLTRACK_CERT_NAMES=source-s2):
 # an existing ca.pem/ca.key pair is reused, existing certificates are kept. TLTRACK_CERT_DAYS

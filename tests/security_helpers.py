@@ -1,10 +1,10 @@
-"""The shipped security configuration in tests: deploy/zenoh (ACL, credentials, TLS router
-settings) and scripts/make_certs.sh, a router that enforces them, and services and client sessions
-under their operators' identities.
+"""The shipped security configuration in tests: the package's access/ (ACL, credentials),
+deploy/zenoh/router-tls.env and scripts/make_certs.sh, a router that enforces them, and services
+and client sessions under their operators' identities.
 
 The tests use the files as shipped, so a test that passes here passes for a deployment with them.
 Only the fuzzer identity is test-only: it may publish anything anywhere, which no deployment may
-allow, so it is added to a copy of the ACL (:func:`fuzz_access`), never to deploy/zenoh.
+allow, so it is added to a copy of the ACL (:func:`fuzz_access`), never to the shipped one.
 """
 
 from __future__ import annotations
@@ -23,10 +23,9 @@ from tltrack.demo import IDENTITY, identity_env, passwords
 from tltrack.transport import LivelinessWatcher, ZenohSettings, open_session, query
 
 ROOT = Path(__file__).resolve().parents[1]
-DEPLOY = ROOT / "deploy" / "zenoh"
-ACL = DEPLOY / "acl.json5"
-USERS = DEPLOY / "users.txt"
-ROUTER_TLS_ENV = DEPLOY / "router-tls.env"
+ACL = demo.ACCESS_DIR / "acl.json5"
+USERS = demo.ACCESS_DIR / "users.txt"
+ROUTER_TLS_ENV = ROOT / "deploy" / "zenoh" / "router-tls.env"
 MAKE_CERTS = ROOT / "scripts" / "make_certs.sh"
 
 TRACKING = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")  #: what an episode needs
@@ -85,7 +84,7 @@ def make_certs(out: Path, *hosts: str, names: str | None = None) -> Path:
 
 
 def router_tls_env(certs: Path) -> dict[str, str]:
-    """deploy/zenoh/router-tls.env with its ``deploy/`` paths resolved (certificates: ``certs``)."""
+    """deploy/zenoh/router-tls.env with its repository paths resolved (certificates: ``certs``)."""
     env = {}
     for line in ROUTER_TLS_ENV.read_text().splitlines():
         if line.strip() and not line.lstrip().startswith("#"):
@@ -93,7 +92,7 @@ def router_tls_env(certs: Path) -> dict[str, str]:
             value = value.strip()
             if value.startswith("deploy/certs/"):
                 value = str(certs / value.removeprefix("deploy/certs/"))
-            elif value.startswith("deploy/"):
+            elif value.startswith(("deploy/", "shared/")):
                 value = str(ROOT / value)
             env[name.strip()] = value
     return env

@@ -20,9 +20,8 @@ from typing import Any
 import pytest
 from livestack import logs, sim_flags, stack
 from tltrack import demo, keys
+from tltrack.services.dashboard import launch
 from tltrack.transport import LivelinessWatcher
-
-from services.dashboard import launch
 
 pytestmark = pytest.mark.integration
 

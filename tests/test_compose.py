@@ -1,7 +1,7 @@
 """compose.yaml end to end, over real containers: build, `up -d`, five scored episodes, a network
 partition of the source tracker and its healing, three sources, and a teardown that leaves nothing
-behind. The router enforces deploy/zenoh/acl.json5 as compose.yaml ships it; the tests on the host
-connect as the referee, with the demo password that compose.yaml defaults to.
+behind. The router enforces shared/tltrack/access/acl.json5 as compose.yaml ships it; the tests on
+the host connect as the referee, with the demo password that compose.yaml defaults to.
 
 Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
 whichever of `docker compose` and `docker-compose` answers. The image is built with
@@ -59,7 +59,7 @@ THREE_WAIT_FOR = [
     "referee:scorer",
 ]
 
-USERS = ROOT / "deploy" / "zenoh" / "users.txt"
+USERS = ROOT / "shared" / "tltrack" / "access" / "users.txt"
 #: the identity each service of compose.yaml runs under
 COMPOSE_IDENTITY = {**IDENTITY, "source_tracker_s2": "source-s2", "source_tracker_s3": "source-s3"}
 #: how the host-side tests connect: as the referee (anyone may query the summary)
@@ -471,13 +471,13 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
         assert "TLTRACK_ZENOH_ACCESS_CONTROL_FILE" not in env[service], service
     router = env["router"]
     assert "TLTRACK_ZENOH_USERNAME" not in router, router
-    # the router mounts ./deploy at /config
+    # the router mounts the package's access/ at /config/access
     for name, path in (
-        ("ACCESS_CONTROL_FILE", "zenoh/acl.json5"),
-        ("USRPWD_DICTIONARY_FILE", "zenoh/users.txt"),
+        ("ACCESS_CONTROL_FILE", "acl.json5"),
+        ("USRPWD_DICTIONARY_FILE", "users.txt"),
     ):
-        assert router.get(f"TLTRACK_ZENOH_{name}") == f"/config/{path}", router
-        assert (ROOT / "deploy" / path).is_file(), path
+        assert router.get(f"TLTRACK_ZENOH_{name}") == f"/config/access/{path}", router
+        assert (ROOT / "shared" / "tltrack" / "access" / path).is_file(), path
 
     def variable(user: str) -> str:
         return "TLTRACK_PASSWORD_" + user.upper().replace("-", "_")

@@ -29,14 +29,13 @@ from tltrack.messages import (
     Truth,
     encode,
 )
+from tltrack.services.dashboard import launch
+from tltrack.services.dashboard.ingest import Ingest
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.server import main
+from tltrack.services.dashboard.state import State, clean_stats
+from tltrack.services.dashboard.web import WebServer, create_app
 from tltrack.transport import LivelinessWatcher, Received
-
-from services.dashboard import launch
-from services.dashboard.ingest import Ingest
-from services.dashboard.metrics import Metrics
-from services.dashboard.server import main
-from services.dashboard.state import State, clean_stats
-from services.dashboard.web import WebServer, create_app
 
 E = "ep-r0"
 EYE = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
@@ -269,7 +268,7 @@ def test_bad_settings_stop_the_dashboard_naming_the_field(capsys):
 
 
 def test_sensor_sim_can_wait_for_the_dashboard_too():
-    from services.sensor_sim.simulator import Settings as SimSettings
+    from tltrack.services.sensor_sim.simulator import Settings as SimSettings
 
     default = SimSettings.model_fields["wait_for"].get_default(call_default_factory=True)
     assert set(default) < set(launch.SIM_WAIT_FOR)
@@ -396,7 +395,7 @@ def test_a_taken_port_stops_the_dashboard_at_once_with_the_reason(tmp_path):
         busy.listen()
         port = busy.getsockname()[1]
         r = subprocess.run(
-            [sys.executable, "-m", "services.dashboard", f"--port={port}"],
+            [sys.executable, "-m", "tltrack.services.dashboard", f"--port={port}"],
             capture_output=True,
             text=True,
             timeout=30,

@@ -58,12 +58,11 @@ from tltrack.messages import (
     encode,
 )
 from tltrack.service import Service
+from tltrack.services.primary_tracker import tracker as primary_svc
+from tltrack.services.scorer import scorer as scorer_svc
+from tltrack.services.scorer.store import Store
+from tltrack.services.source_tracker import tracker as source_svc
 from tltrack.transport import Received, Subscriber, ZenohSettings
-
-from services.primary_tracker import tracker as primary_svc
-from services.scorer import scorer as scorer_svc
-from services.scorer.store import Store
-from services.source_tracker import tracker as source_svc
 
 E = "ep-r0"
 T0 = 1.8e9

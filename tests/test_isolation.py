@@ -1,4 +1,4 @@
-"""Operator isolation enforced by the router, with the ACL and credentials of deploy/zenoh.
+"""Operator isolation enforced by the router, with the ACL and credentials the package ships.
 
 Every service runs under its own operator's identity. Spy sessions under each identity subscribe
 to what it may read and to what it may not, and query liveliness, while a real episode publishes

@@ -1,3 +1,3 @@
-from services.dashboard.server import main
+from tltrack.services.dashboard.server import main
 
 main()

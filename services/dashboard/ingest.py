@@ -17,10 +17,9 @@ from tltrack.messages import (
     RejectCounter,
     Truth,
 )
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.state import Role, State
 from tltrack.transport import Received, decode_received
-
-from services.dashboard.metrics import Metrics
-from services.dashboard.state import Role, State
 
 log = logging.getLogger("dashboard")
 

@@ -12,7 +12,7 @@ import urllib.error
 import urllib.request
 from typing import Protocol
 
-from services.dashboard.settings import DEFAULT_HOST, DEFAULT_PORT, NAME
+from tltrack.services.dashboard.settings import DEFAULT_HOST, DEFAULT_PORT, NAME
 
 #: sensor_sim's default ``wait_for`` plus the dashboard
 SIM_WAIT_FOR = [

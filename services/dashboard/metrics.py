@@ -23,8 +23,7 @@ from prometheus_client import (
 )
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
-
-from services.dashboard.state import ErrorUpdate, State
+from tltrack.services.dashboard.state import ErrorUpdate, State
 
 #: end-to-end latency on one host is milliseconds; seconds means a stalled service
 LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)

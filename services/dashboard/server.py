@@ -11,12 +11,11 @@ import logging
 
 from tltrack import keys
 from tltrack.service import Service, load_settings, setup_logging
-
-from services.dashboard.ingest import SUBSCRIPTIONS, Ingest
-from services.dashboard.metrics import Metrics
-from services.dashboard.settings import NAME, Settings
-from services.dashboard.state import State
-from services.dashboard.web import WebServer, create_app
+from tltrack.services.dashboard.ingest import SUBSCRIPTIONS, Ingest
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.settings import NAME, Settings
+from tltrack.services.dashboard.state import State
+from tltrack.services.dashboard.web import WebServer, create_app
 
 log = logging.getLogger("dashboard")
 

@@ -17,9 +17,8 @@ from fastapi import FastAPI, Query
 from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
-
-from services.dashboard.metrics import Metrics
-from services.dashboard.state import State
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.state import State
 
 log = logging.getLogger("dashboard")
 

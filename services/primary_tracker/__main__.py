@@ -1,3 +1,3 @@
-from services.primary_tracker.tracker import main
+from tltrack.services.primary_tracker.tracker import main
 
 main()

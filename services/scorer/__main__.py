@@ -1,3 +1,3 @@
-from services.scorer.scorer import main
+from tltrack.services.scorer.scorer import main
 
 main()

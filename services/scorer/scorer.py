@@ -19,11 +19,10 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 from tltrack.service import Service, load_settings, setup_logging
+from tltrack.services.scorer.store import Store
+from tltrack.services.scorer.summary import summarize
 from tltrack.summary import print_summary
 from tltrack.transport import Queryable, Received, ZenohSettings, decode_received
-
-from services.scorer.store import Store
-from services.scorer.summary import summarize
 
 log = logging.getLogger("scorer")
 NAME = "scorer"

@@ -13,8 +13,7 @@ from typing import Any
 
 import numpy as np
 from tltrack.models.motion import POS
-
-from services.scorer.store import Store
+from tltrack.services.scorer.store import Store
 
 
 def _percentiles(ms: list[float]) -> dict[str, float | None]:

@@ -1,3 +1,3 @@
-from services.sensor_sim.simulator import main
+from tltrack.services.sensor_sim.simulator import main
 
 main()

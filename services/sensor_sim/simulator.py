@@ -23,9 +23,8 @@ from tltrack.config import Config, ConfigError, load_config, make_config
 from tltrack.engine.scenario import PRIMARY, simulate
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
 from tltrack.service import Service, load_settings, setup_logging
+from tltrack.services.sensor_sim import replay
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
-
-from services.sensor_sim import replay
 
 log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"

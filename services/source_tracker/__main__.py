@@ -1,3 +1,3 @@
-from services.source_tracker.tracker import main
+from tltrack.services.source_tracker.tracker import main
 
 main()

@@ -252,21 +252,57 @@ def demo(
     port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
     host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
 ) -> None:
-    """Start the router and the four services on loopback, run one episode, print the summary."""
+    """Start the router and the four services on loopback, run one episode, print the summary.
+
+    The router enforces the package's access control; every service runs as its operator. Any
+    stop signal (or the death of this process) stops every process it started.
+    """
     from tltrack import demo as d
+
+    try:
+        d.check_access()
+    except d.AccessControlMissingError as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+    try:
+        with d.stop_on_signals():
+            summary = _run_demo(
+                d, steps, particles, pace, realtime, preset, truth, seed, out, serve, port, host
+            )
+    except d.Interrupted as stop:
+        console.print(f"stopped by {stop}; the router and every service are stopped")
+        raise typer.Exit(128 + stop.signum) from None
+    if json_out:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1))
+        console.print(f"wrote {json_out}")
+
+
+def _run_demo(
+    d: Any,
+    steps: int,
+    particles: int,
+    pace: float,
+    realtime: bool,
+    preset: str,
+    truth: str,
+    seed: int,
+    out: Path,
+    serve: bool,
+    port: int,
+    host: str,
+) -> dict[str, Any]:
+    """One episode on a fresh stack; the scorer's summary, with ``access_control`` set."""
+    from tltrack.filters.particle import warm_up
     from tltrack.summary import print_summary
 
     endpoint = f"tcp/127.0.0.1:{d.free_port()}"
     db = out / "scorer.sqlite"
     for suffix in ("", "-wal", "-shm"):
         Path(f"{db}{suffix}").unlink(missing_ok=True)
-    secure = d.ACCESS_DIR.exists()  # a checkout ships the ACL: operators isolated by default
-    user = "referee" if secure else None
-    console.print(
-        f"router {endpoint}{' (access control: deploy/zenoh)' if secure else ''}; "
-        f"logs in {out / 'logs'}"
-    )
-    with d.Stack(endpoint, out / "logs", secure=secure) as stack:
+    console.print(f"router {endpoint} (access control: {d.ACCESS_DIR}); logs in {out / 'logs'}")
+    warm_up()  # compile the kernels once here, not in several services at once
+    with d.Stack(endpoint, out / "logs", secure=True) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         stack.start_service("primary_tracker")
@@ -274,7 +310,7 @@ def demo(
         sim_env: dict[str, str] | None = None
         page = ""
         if serve:
-            from services.dashboard import launch
+            from tltrack.services.dashboard import launch
 
             page = launch.start(stack, port, host)
             if not launch.wait_ready(page, 30):
@@ -298,24 +334,21 @@ def demo(
         if rc != 0:
             console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)
-        summary = d.wait_for_scored(endpoint, 1, 120, user)
-        if serve and summary is not None:
-            print_summary(summary)
+        summary = d.wait_for_scored(endpoint, 1, 120, "referee")
+        if summary is None:
+            console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
+            raise typer.Exit(1)
+        summary["access_control"] = True  # the router enforced the ACL; every service logged in
+        print_summary(summary)
+        if serve:
             console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")
             d.serve_until_interrupted(stack, "dashboard")
-    if summary is None:
-        console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
-        raise typer.Exit(1)
-    if not serve:
-        print_summary(summary)
-        console.print(
-            "live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
-            "(Prometheus metrics at /metrics)"
-        )
-    if json_out:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(summary, indent=1))
-        console.print(f"wrote {json_out}")
+        else:
+            console.print(
+                "live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
+                "(Prometheus metrics at /metrics)"
+            )
+    return summary
 
 
 @app.command(
@@ -357,8 +390,14 @@ def bench_live(
     Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
     """
     from tltrack import livebench
+    from tltrack.demo import Interrupted, stop_on_signals
 
-    result = livebench.run(particles, pace, steps, [float(r) for r in rates.split(",")])
+    try:
+        with stop_on_signals():
+            result = livebench.run(particles, pace, steps, [float(r) for r in rates.split(",")])
+    except Interrupted as stop:
+        console.print(f"stopped by {stop}; the router and every service are stopped")
+        raise typer.Exit(128 + stop.signum) from None
     text = json.dumps(result, indent=1)
     console.print(text)
     if json_out:

@@ -1,9 +1,20 @@
 """``tltrack demo``: the router and the four services as separate processes on loopback, one
-episode, the scorer's summary, and a clean shutdown (no orphan, no hang)."""
+episode, the scorer's summary, and a clean shutdown (no orphan, no hang).
+
+Children never outlive the command that started them. Whatever stops it:
+
+- SIGTERM, SIGHUP or SIGINT (even in a background job, whose SIGINT a shell sets to ignored):
+  :func:`stop_on_signals` turns each into :class:`Interrupted` in the main thread, and
+  :class:`Stack` stops the services, then the router;
+- SIGKILL, or any other death: each child asked the kernel at birth for SIGTERM when its parent
+  dies (Linux ``prctl(PR_SET_PDEATHSIG)``), so it shuts down as on a plain SIGTERM.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import json
 import os
 import signal
@@ -11,9 +22,10 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import FrameType
 from typing import IO, Any
 
 import zenoh
@@ -22,6 +34,8 @@ from tltrack import keys
 from tltrack.transport import ZenohSettings, open_session, query
 
 SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
+#: the signals that stop a command and every process it started
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def free_port() -> int:
@@ -30,8 +44,8 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-#: The shipped access control (deploy/zenoh in a checkout): one identity per operator.
-ACCESS_DIR = Path(__file__).resolve().parents[2] / "deploy" / "zenoh"
+#: The access control shipped in the package (deploy/zenoh/README.md): one identity per operator.
+ACCESS_DIR = Path(__file__).resolve().parent / "access"
 #: the identity each service runs under (README: who may read what)
 IDENTITY = {
     "sensor_sim": "sensor",
@@ -40,6 +54,20 @@ IDENTITY = {
     "source_tracker": "source-s1",
     "dashboard": "dashboard",
 }
+
+
+class AccessControlMissingError(RuntimeError):
+    """The package's ACL or password file is gone: the demo refuses to run an open router."""
+
+
+def check_access(access: Path = ACCESS_DIR) -> None:
+    """Raise :class:`AccessControlMissingError` unless the ACL and password file are readable."""
+    for name in ("acl.json5", "users.txt"):
+        if not (access / name).is_file():
+            raise AccessControlMissingError(
+                f"{access / name} is missing: the demo will not run a router without access "
+                "control (reinstall tltrack to restore the package's access/ files)"
+            )
 
 
 def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
@@ -60,6 +88,77 @@ def router_access_env(access: Path = ACCESS_DIR) -> dict[str, str]:
         "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(access / "acl.json5"),
         "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(access / "users.txt"),
     }
+
+
+# ---- stopping -----------------------------------------------------------------------------------
+
+
+class Interrupted(BaseException):
+    """A stop signal reached the command; ``signum`` says which."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+class _Deferral:
+    """While ``depth`` > 0 a stop signal is only noted; it is raised when the depth returns to 0."""
+
+    depth = 0
+    pending: int | None = None
+
+
+def _on_stop_signal(signum: int, _frame: FrameType | None) -> None:
+    if _Deferral.depth:
+        _Deferral.pending = signum
+        return
+    raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """Within the block, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted`.
+
+    SIGINT is handled even when it was inherited as ignored (a background job), since the
+    children run in their own sessions and only this process can stop them.
+    """
+    previous = {sig: signal.signal(sig, _on_stop_signal) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """A stop signal inside the block is raised at its end: a child is never started without
+    being recorded, and a stop is never cut short."""
+    _Deferral.depth += 1
+    try:
+        yield
+    finally:
+        _Deferral.depth -= 1
+        if _Deferral.depth == 0 and _Deferral.pending is not None:
+            signum, _Deferral.pending = _Deferral.pending, None
+            raise Interrupted(signum)
+
+
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+_libc = ctypes.CDLL(ctypes.util.find_library("c")) if sys.platform == "linux" else None
+
+
+def _child_setup(parent: int) -> Callable[[], None]:
+    """What a child runs between fork and exec: SIGTERM when ``parent`` dies, no blocked signal."""
+
+    def setup() -> None:
+        signal.pthread_sigmask(signal.SIG_SETMASK, set())
+        if _libc is not None:
+            _libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+            if os.getppid() != parent:  # the parent died before prctl: no signal would come
+                os.kill(os.getpid(), signal.SIGTERM)
+
+    return setup
 
 
 @dataclass
@@ -88,13 +187,15 @@ class Stack:
             **self.env,
             **(env or {}),
         }
-        self.procs[name] = subprocess.Popen(
-            [sys.executable, *argv],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            env=full_env,
-            start_new_session=True,
-        )
+        with _signals_deferred():
+            self.procs[name] = subprocess.Popen(
+                [sys.executable, *argv],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=full_env,
+                start_new_session=True,  # a terminal's Ctrl-C reaches this process alone
+                preexec_fn=_child_setup(os.getpid()),
+            )
 
     def start_router(self) -> None:
         access = router_access_env() if self.secure else {}
@@ -102,7 +203,7 @@ class Stack:
 
     def start_service(self, name: str, *flags: str, env: dict[str, str] | None = None) -> None:
         identity = identity_env(IDENTITY[name]) if self.secure else {}
-        self.start(name, ["-m", f"services.{name}", *flags], {**identity, **(env or {})})
+        self.start(name, ["-m", f"tltrack.services.{name}", *flags], {**identity, **(env or {})})
 
     def wait(self, name: str, timeout: float) -> int | None:
         try:
@@ -116,20 +217,17 @@ class Stack:
             p.send_signal(sig)
             p.wait(10)
 
-    def stop(self, timeout: float = 10.0) -> dict[str, int | None]:
-        """SIGTERM everything (services first, router last); SIGKILL what outlives ``timeout``."""
-        order = [n for n in self.procs if n != "router"] + (
-            ["router"] if "router" in self.procs else []
-        )
-        for name in order:
-            p = self.procs[name]
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(timeout)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+    def stop(self, timeout: float = 6.0) -> dict[str, int | None]:
+        """SIGTERM every service at once, then the router; SIGKILL what outlives ``timeout``.
+
+        The router goes last, so the services' last messages (and the scorer's final rows) still
+        reach it while they close.
+        """
+        with _signals_deferred():
+            services = [p for n, p in self.procs.items() if n != "router"]
+            _terminate(services, timeout)
+            if "router" in self.procs:
+                _terminate([self.procs["router"]], timeout)
         for f in self._files:
             f.close()
         return {n: p.returncode for n, p in self.procs.items()}
@@ -139,6 +237,20 @@ class Stack:
 
     def __exit__(self, *_: object) -> None:
         self.stop()
+
+
+def _terminate(procs: list[subprocess.Popen[bytes]], timeout: float) -> None:
+    """SIGTERM ``procs`` together, wait for all up to ``timeout`` s, then SIGKILL the rest."""
+    live = [p for p in procs if p.poll() is None]
+    for p in live:
+        p.send_signal(signal.SIGTERM)
+    deadline = time.monotonic() + timeout
+    for p in live:
+        try:
+            p.wait(max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 @contextlib.contextmanager
@@ -176,22 +288,9 @@ def wait_for_scored(
 
 
 def serve_until_interrupted(stack: Stack, name: str) -> None:
-    """Keep the stack up until Ctrl-C or SIGTERM (or until ``name`` dies).
-
-    A shell's background job ignores SIGINT, and a bare SIGTERM would orphan the children (each
-    runs in its own session), so both become KeyboardInterrupt here and the stack shuts down.
-    """
-
-    def _stop(_signum: int, _frame: object) -> None:
-        raise KeyboardInterrupt
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _stop)
-    try:
-        while stack.procs[name].poll() is None:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
+    """Keep the stack up until a stop signal (see :func:`stop_on_signals`) or ``name`` dies."""
+    while stack.procs[name].poll() is None:
+        time.sleep(0.5)
 
 
 def sim_flags(

@@ -41,10 +41,12 @@ def table(summary: dict[str, Any]) -> Table:
         )
     m = summary.get("messages", {})
     lat = summary.get("latency_ms", {})
+    access = summary.get("access_control")
     t.caption = (
         f"latency p50/p95/p99: {_ms(lat.get('p50'))}/{_ms(lat.get('p95'))}/"
         f"{_ms(lat.get('p99'))} ms; rejected {m.get('rejected_total', 0)}, "
         f"dropped {m.get('dropped', 0)}, missing estimates {m.get('missing_estimates', 0)}"
+        + ("" if access is None else f"; access control {'on' if access else 'OFF'}")
     )
     return t
 
