@@ -1,33 +1,54 @@
-"""Linear-Gaussian stand-ins for the models, where a Kalman filter is exact."""
+"""A test-only sensor and a Kalman filter: linear-Gaussian stand-ins where the KF is exact.
+
+:class:`PositionSensor` is a whole new sensor written against the
+:class:`~tltrack.models.base.MeasurementModel` Protocol, outside the package: that it runs through
+every filter kind and role (tests/test_model_interface.py) is what proves the interface.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
-from tltrack.models.motion import ConstantVelocity
+from tltrack.models.base import Layout
+from tltrack.models.constant_velocity import ConstantVelocity
+from tltrack.models.gaussian_sensor import GaussianSensor
+
+CV_LAYOUT = ConstantVelocity.layout
 
 
 @dataclass(frozen=True)
-class PositionSensor:
-    """h(x) = [x, y]: linear, no angle, so the Kalman filter is the exact posterior."""
+class PositionSensor(GaussianSensor):
+    """z = [x, y] + w, w ~ N(0, I_w sigma^2 I): a GNSS-like fix, linear, no angle."""
 
+    kind: ClassVar[str] = "test-position"
+    components: ClassVar[tuple[str, ...]] = ("x_m", "y_m")
+    angular: ClassVar[tuple[bool, ...]] = (False, False)
+
+    sigma: float = 5.0
+    layout: Layout = CV_LAYOUT
     position: tuple[float, float] = (0.0, 0.0)
-    n_z: int = 2
 
-    def h(self, x):
-        return np.stack([x[0], x[2]])
+    def R(self, intensity: float) -> np.ndarray:
+        return intensity * self.sigma**2 * np.eye(2)
 
-    def H(self, x):
+    def h(self, x: np.ndarray) -> np.ndarray:
+        return self.layout.position(x)
+
+    def H(self, x: np.ndarray) -> np.ndarray:
         H = np.zeros((2, len(x)))
-        H[0, 0] = H[1, 2] = 1.0
+        H[0, self.layout.pos[0]] = H[1, self.layout.pos[1]] = 1.0
         return H
 
-    def residual(self, z, zhat):
-        return np.asarray(z, dtype=float) - zhat
+    def miscalibration(self, sigmas: float, intensity: float) -> np.ndarray:
+        return np.array([sigmas * self.sigma * np.sqrt(intensity), 0.0])
 
-    def mean(self, Z, axis):
-        return Z.mean(axis=axis)
+    def to_position(self, z: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(z, dtype=float), np.asarray(P, dtype=float)
+
+    def from_position(self, z: np.ndarray, S: np.ndarray) -> np.ndarray:
+        return S
 
 
 def cv_model(q: float = 0.1) -> ConstantVelocity:

@@ -8,8 +8,9 @@ import numpy as np
 from tltrack.config import make_config
 from tltrack.engine.faults import STALE_LAG
 from tltrack.engine.montecarlo import trace_run
-from tltrack.engine.scenario import PRIMARY, simulate
+from tltrack.engine.scenario import simulate
 from tltrack.messages import Measurement, Transfer
+from tltrack.models.from_config import PRIMARY
 from tltrack.tracking import PrimaryEpisode, SourceEpisode
 
 CFG = make_config(preset="arasaratnam-haykin", truth="fixed", seed=3, K=25, particles=400)

@@ -49,7 +49,9 @@ def received(key: str, payload: Message | bytes, t_recv: float | None = None) ->
 
 
 def truth(k: int, x: float, y: float, e: str = E) -> Truth:
-    return Truth(episode=e, sender="sensor_sim", k=k, t_sensor=100.0 + k, x=[x, 0.0, y, 0.0])
+    return Truth(
+        episode=e, sender="sensor_sim", k=k, t_sensor=100.0 + k, x=[x, 0.0, y, 0.0], pos=[x, y]
+    )
 
 
 def estimate(name: str, k: int, x: float, y: float, used: bool = False, e: str = E) -> EstimateMsg:
@@ -60,6 +62,7 @@ def estimate(name: str, k: int, x: float, y: float, used: bool = False, e: str =
         t_sensor=100.0 + k,
         filter=name,
         x=[x, 0.0, y, 0.0],
+        pos=[x, y],
         P=EYE,
         transfer_used=used,
         t_sent=100.0 + k,

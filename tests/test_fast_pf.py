@@ -19,16 +19,15 @@ import pytest
 from numba import njit
 from scipy import stats
 from tltrack.config import make_config
-from tltrack.engine.scenario import PRIMARY, intensity, sensor, simulate
+from tltrack.engine.scenario import simulate
 from tltrack.engine.streams import streams
-from tltrack.filters import kernels
 from tltrack.filters.base import Estimate
+from tltrack.filters.kernels import fastmath as kernels
 from tltrack.filters.particle import ParticleFilter, gaussian_loglik
 from tltrack.filters.resampling import systematic_indices, systematic_walk
 from tltrack.filters.transfer import Primary, Source
-from tltrack.models.measurement import RangeBearing
-from tltrack.models.motion import ConstantVelocity, CoordinatedTurn, motion_model
-from tltrack.models.observation import Observation
+from tltrack.models import ConstantVelocity, CoordinatedTurn, Observation, RangeBearing
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 
 class SlowCT(CoordinatedTurn):
@@ -157,7 +156,7 @@ def _ct_pair(B=3, N=2001, seed=7):
 
 def test_ct_propagation_equals_the_generic_path():
     _, f, s = _ct_pair()
-    assert f._motion == "ct" and s._motion == "generic"
+    assert f._propagate is not None and s._propagate is None  # fast and generic paths
     f.x[4, 1, :5] = [0.0, 1e-7, -3e-6, 2e6, -5e5]  # Taylor branch, and beyond the fast sin/cos
     s.x[4, 1, :5] = f.x[4, 1, :5]
     f.predict()
@@ -171,7 +170,7 @@ def test_cv_propagation_equals_the_generic_path():
     P0 = np.diag([50.0, 1.0, 50.0, 1.0])
     f = ParticleFilter(model, x0, P0, 999, streams(3, range(2), "cv"))
     s = ParticleFilter(slow, x0, P0, 999, streams(3, range(2), "cv"))
-    assert f._motion == "cv"
+    assert f._propagate is not None
     for _ in range(3):
         f.predict()
         s.predict()
@@ -182,8 +181,8 @@ def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
     cfg, f, _ = _ct_pair()
     f.predict()
     rb = sensor(cfg)
-    slow = SlowRB(rb.sigma_r, rb.sigma_bearing, (150.0, -40.0))
-    fast = RangeBearing(rb.sigma_r, rb.sigma_bearing, (150.0, -40.0))
+    slow = SlowRB(rb.sigma_r, rb.sigma_bearing, rb.layout, (150.0, -40.0))
+    fast = RangeBearing(rb.sigma_r, rb.sigma_bearing, rb.layout, (150.0, -40.0))
     # bearings near the +-pi cut, a correlated covariance, and one run masked out
     mean = np.array([[1500.0, 1400.0, 1300.0], [3.1, -3.13, 0.4]])
     cov = np.array([[[400.0, 0.05], [0.05, 1e-4]]] * 3)
@@ -195,7 +194,7 @@ def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
     # two statements from one place share a range and a bearing per particle; a third is elsewhere
     mean2 = np.array([[1450.0, 1350.0, 1250.0], [-3.14, 3.135, 0.45]])
-    far = RangeBearing(rb.sigma_r, rb.sigma_bearing, (-500.0, 800.0))
+    far = RangeBearing(rb.sigma_r, rb.sigma_bearing, rb.layout, (-500.0, 800.0))
     stmts = [
         Observation(fast, mean, cov, mask),
         Observation(fast, mean2, 3 * cov),
@@ -205,7 +204,9 @@ def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
     want = sum(
         gaussian_loglik(
             Observation(
-                SlowRB(o.sensor.sigma_r, o.sensor.sigma_bearing, o.sensor.position),
+                SlowRB(
+                    o.sensor.sigma_r, o.sensor.sigma_bearing, o.sensor.layout, o.sensor.position
+                ),
                 o.mean,
                 o.cov,
                 o.mask,

@@ -85,12 +85,13 @@ def _template(kind: str) -> Message:
     if kind == "transfer":
         return Transfer(**common, sender="s1", k_apply=6, eta=[1500.0, 0.7], P_eta=SPD2)
     if kind == "truth":
-        return Truth(**common, sender="sensor_sim", x=[1.0, 2.0, 3.0, 4.0])
+        return Truth(**common, sender="sensor_sim", x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0])
     return EstimateMsg(
         **common,
         sender="primary",
         filter="tl-pf",
         x=[1.0, 2.0, 3.0, 4.0],
+        pos=[1.0, 3.0],
         P=SPD4,
         transfer_used=True,
         t_sent=T0,
@@ -162,7 +163,7 @@ def _structured(rnd: random.Random, kind: str) -> bytes:
     field = rnd.choice(sorted(d))
     how = rnd.randrange(9)
     if how == 0:
-        d["schema_version"] = rnd.choice([0, 2, 99, -1, "1", 1.0, None, True, [1]])
+        d["schema_version"] = rnd.choice([0, 1, 99, -1, "2", 2.0, None, True, [2]])
     elif how == 1:
         d["type"] = rnd.choice(
             ["measurement", "transfer", "truth", "estimate", "episode_end", "", None, 7]

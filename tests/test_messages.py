@@ -17,6 +17,7 @@ from tltrack.messages import (
     MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
     REASONS,
+    SCHEMA_VERSION,
     EpisodeEnd,
     EpisodeStart,
     EstimateMsg,
@@ -29,6 +30,8 @@ from tltrack.messages import (
     decode,
     encode,
 )
+
+V = SCHEMA_VERSION
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -45,14 +48,15 @@ def samples() -> list[Message]:
     cfg = make_config(scenario="ct")
     return [
         Measurement(**COMMON, k=3, sensor="radar-1", z=np.array([1500.0, 0.7])),
-        Truth(**COMMON, k=3, x=np.array([1.0, 2.0, 3.0, 4.0, -0.05])),
-        Truth(**COMMON, k=0, x=[1.0, 2.0, 3.0, 4.0]),
+        Truth(**COMMON, k=3, x=np.array([1.0, 2.0, 3.0, 4.0, -0.05]), pos=np.array([1.0, 3.0])),
+        Truth(**COMMON, k=0, x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0]),
         Transfer(**COMMON, k=3, k_apply=4, eta=np.array([1500.0, 0.7]), P_eta=_spd(2)),
         EstimateMsg(
             **COMMON,
             k=7,
             filter="tl-pf",
             x=np.arange(5.0),
+            pos=[0.0, 2.0],
             P=_spd(5),
             transfer_used=True,
             t_sent=T0 + 0.01,
@@ -63,6 +67,7 @@ def samples() -> list[Message]:
             k=7,
             filter="sir",
             x=np.arange(4.0),
+            pos=[0.0, 2.0],
             P=_spd(4),
             transfer_used=False,
             t_sent=T0,
@@ -103,7 +108,7 @@ def test_round_trip(msg: Message) -> None:
     assert isinstance(data, bytes) and len(data) < MAX_PAYLOAD_BYTES
     back = decode(data, type(msg))
     assert back == msg
-    assert back.schema_version == 1
+    assert back.schema_version == SCHEMA_VERSION
     assert encode(back) == data  # canonical: encoding is stable
 
 
@@ -130,7 +135,9 @@ def test_every_type_is_registered() -> None:
 
 def test_too_large_is_refused_before_unpacking() -> None:
     # A valid msgpack map far over the limit: refusing it must not cost an unpack.
-    big = pack({"schema_version": 1, "type": "transfer", "pad": "x" * (4 * 1024 * 1024)})
+    big = pack(
+        {"schema_version": SCHEMA_VERSION, "type": "transfer", "pad": "x" * (4 * 1024 * 1024)}
+    )
     t = time.perf_counter()
     for _ in range(100):
         assert reject(big, Transfer) == "too_large"
@@ -152,9 +159,15 @@ def test_too_large_is_refused_before_unpacking() -> None:
         b"\xc6\x7f\xff\xff\xff",  # bin32 claiming 2 GiB
         b"\xa2\xff\xfe",  # invalid UTF-8
         pack({1: 2}),  # non-string map key
-        pack({"schema_version": 1, "type": "transfer", "pad": b"bytes"}),  # bin not allowed
-        pack({"schema_version": 1, "type": "transfer", "t": msgpack.Timestamp(1, 0)}),  # ext
-        pack({"schema_version": 1, "type": "transfer", "e": msgpack.ExtType(5, b"xyz")}),
+        pack(
+            {"schema_version": SCHEMA_VERSION, "type": "transfer", "pad": b"bytes"}
+        ),  # bin not allowed
+        pack(
+            {"schema_version": SCHEMA_VERSION, "type": "transfer", "t": msgpack.Timestamp(1, 0)}
+        ),  # ext
+        pack(
+            {"schema_version": SCHEMA_VERSION, "type": "transfer", "e": msgpack.ExtType(5, b"xyz")}
+        ),
     ],
 )
 def test_garbage_is_not_msgpack(payload: bytes) -> None:
@@ -176,7 +189,7 @@ def test_deep_nesting_is_refused() -> None:
     assert reject(b"\x91" * 20_000 + b"\x01", Transfer) in ("not_msgpack", "bad_structure")
 
 
-@pytest.mark.parametrize("version", [0, 2, 99, -1, "1", 1.0, True, None, [1]])
+@pytest.mark.parametrize("version", [0, 1, 99, -1, "2", 2.0, True, None, [2]])
 def test_unknown_schema_version(version: Any) -> None:
     d = raw(VALID_TRANSFER)
     d["schema_version"] = version
@@ -187,7 +200,7 @@ def test_unknown_schema_version(version: Any) -> None:
 
 def test_constructing_an_unknown_version_fails() -> None:
     with pytest.raises(ValueError):
-        Measurement(**COMMON, k=0, sensor="a", z=[1.0, 2.0], schema_version=2)
+        Measurement(**COMMON, k=0, sensor="a", z=[1.0, 2.0], schema_version=V + 1)
 
 
 def test_wrong_type_tag() -> None:

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 from tltrack.config import make_config
-from tltrack.models import RangeBearing, motion_model, wrap_angle
+from tltrack.models import CoordinatedTurn, RangeBearing, motion_model, wrap_angle
 
 
 def test_wrap_angle_lands_in_half_open_interval():
@@ -33,7 +33,7 @@ def test_ct_is_continuous_through_zero_turn_rate():
 @pytest.mark.parametrize("w", [-0.05, 1e-9, 0.2])
 def test_jacobians_match_finite_differences(w):
     m = motion_model(make_config(scenario="ct"))
-    s = RangeBearing(10.0, 3e-3, position=(50.0, -20.0))
+    s = RangeBearing(10.0, 3e-3, CoordinatedTurn.layout, position=(50.0, -20.0))
     x = np.array([1000.0, 300.0, -400.0, 20.0, w])
     eps = 1e-6
     basis = np.eye(5)
@@ -44,7 +44,7 @@ def test_jacobians_match_finite_differences(w):
 
 
 def test_bearing_residual_and_mean_across_the_cut():
-    s = RangeBearing(10.0, 3e-3)
+    s = RangeBearing(10.0, 3e-3, CoordinatedTurn.layout)
     z = np.array([100.0, np.pi - 0.01])
     zhat = np.array([100.0, -np.pi + 0.01])
     assert s.residual(z, zhat)[1] == pytest.approx(-0.02)

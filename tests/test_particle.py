@@ -16,7 +16,7 @@ def _measurements(steps=8, seed=3):
     model, x, zs = cv_model(), X0.copy(), []
     for _ in range(steps):
         x = model.A @ x + model.Q_sqrt @ rng.standard_normal(2)
-        zs.append(np.array([x[0], x[2]]) + rng.normal(0, 5.0, 2))
+        zs.append(model.layout.position(x) + rng.normal(0, 5.0, 2))
     return zs
 
 

@@ -2,36 +2,24 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+from doubles import PositionSensor
 from tltrack.config import make_config
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
-from tltrack.models.measurement import RangeBearing
-from tltrack.models.motion import POS, ConstantVelocity, CoordinatedTurn
-
-
-@dataclass(frozen=True, eq=False)
-class PositionSensor:
-    """z = C x + w with C picking (x, y): a linear stand-in for RangeBearing's H."""
-
-    C: np.ndarray
-
-    def H(self, x: np.ndarray) -> np.ndarray:
-        return self.C
+from tltrack.models import ConstantVelocity, CoordinatedTurn, RangeBearing
 
 
 def test_linear_gaussian_bound_is_the_kalman_covariance() -> None:
     """The singular white-noise-acceleration Q_v must not matter: the recursion never inverts it."""
     model = ConstantVelocity(T=1.0, q=0.1)
-    C = np.zeros((2, 4))
-    C[0, POS[0]] = C[1, POS[1]] = 1.0
+    sensor = PositionSensor(layout=model.layout)
+    C = sensor.H(np.zeros(4))
     R = np.diag([25.0, 9.0])
     P0 = np.diag([50.0, 1.0, 50.0, 1.0])
     K = 20
     truths = np.random.default_rng(0).standard_normal((3, K + 1, 4))  # irrelevant when linear
-    bound = pcrlb(model, [(PositionSensor(C), R)], truths, P0)
+    bound = pcrlb(model, [(sensor, R)], truths, P0)
     P = P0
     expected = []
     for _ in range(K):
@@ -47,8 +35,8 @@ def test_two_range_bearing_sensors_bound_below_one() -> None:
     model = CoordinatedTurn(T=cfg.Ts, q1=cfg.q1, q2=cfg.q2)
     truths = np.stack([truth(cfg, run) for run in range(4)])
     P0 = np.diag(cfg.P0_diag)
-    primary = RangeBearing(cfg.sigma_r, cfg.sigma_bearing)
-    source = RangeBearing(cfg.sigma_r, cfg.sigma_bearing, (2000.0, -1000.0))
+    primary = RangeBearing(cfg.sigma_r, cfg.sigma_bearing, model.layout)
+    source = RangeBearing(cfg.sigma_r, cfg.sigma_bearing, model.layout, (2000.0, -1000.0))
     one = pcrlb(model, [(primary, primary.R(4.0))], truths, P0)
     two = pcrlb(model, [(primary, primary.R(4.0)), (source, source.R(1.0))], truths, P0)
     assert one.shape == two.shape == (cfg.K,)

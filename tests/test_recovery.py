@@ -10,7 +10,8 @@ CFG = make_config(preset="arasaratnam-haykin")
 
 
 def test_a_cloud_far_from_the_measurement_is_redrawn_around_it():
-    model, s = motion_model(CFG), RangeBearing(10.0, 3e-3)
+    model = motion_model(CFG)
+    s = RangeBearing(10.0, 3e-3, model.layout)
     x0 = np.array(CFG.x0)[:, None].repeat(2, 1)
     pf = ParticleFilter(model, x0, np.diag(CFG.P0_diag), 500, streams(0, range(2), "r"))
     pf.predict()
@@ -27,7 +28,7 @@ def test_a_cloud_far_from_the_measurement_is_redrawn_around_it():
 
 
 def test_recovery_brings_lost_runs_back_in_the_seeds_hard_preset():
-    """The seed's own q2 loses runs (NOTES.md); recovery is an option and must help."""
+    """The seed's own q2 loses runs (docs/background.md); recovery is an option and must help."""
     cfg = make_config(preset="paper", truth="random", particles=1000, runs=12, K=60, seed=5)
     off = run_experiment(cfg, ["pf"], time_steps=False)["pf"]
     on = run_experiment(cfg.with_(recovery=True), ["pf"], time_steps=False)["pf"]

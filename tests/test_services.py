@@ -10,6 +10,7 @@ from livestack import estimates, logs, sim_flags, stack, start_all, wait_until
 from tltrack import demo, keys
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
+from tltrack.messages import SCHEMA_VERSION
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -92,7 +93,7 @@ GARBAGE = [
     ),
     msgpack.packb(
         {
-            "schema_version": 1,
+            "schema_version": SCHEMA_VERSION,
             "type": "transfer",
             "episode": "ep-r0",
             "sender": "s1",

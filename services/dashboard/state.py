@@ -20,7 +20,6 @@ from typing import Any, Literal
 
 import numpy as np
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
-from tltrack.models.motion import POS
 
 Role = Literal["source", "tl", "isolated"]
 Verdict = Literal["new", "duplicate", "capacity"]
@@ -30,8 +29,8 @@ MAX_SERVICES = 64
 MAX_STATS_ENTRIES = 256  #: keys kept per mapping in a service's statistics
 
 
-def _xy(x: list[float]) -> XY:
-    return (float(x[POS[0]]), float(x[POS[1]]))
+def _xy(pos: list[float]) -> XY:
+    return (float(pos[0]), float(pos[1]))
 
 
 def _percentiles(values: list[float]) -> dict[str, float | None]:
@@ -202,7 +201,7 @@ class State:
                 return "duplicate", []
             if len(ep.truth) >= self.max_steps:
                 return "capacity", []
-            ep.truth[m.k] = t = _xy(m.x)
+            ep.truth[m.k] = t = _xy(m.pos)
             updates = []
             for name, tr in ep.tracks.items():
                 if m.k in tr.pos:
@@ -225,7 +224,7 @@ class State:
                 return "duplicate", None
             if len(tr.pos) >= self.max_steps:
                 return "capacity", None
-            tr.pos[m.k] = _xy(m.x)
+            tr.pos[m.k] = _xy(m.pos)
             tr.used[m.k] = m.transfer_used
             tr.latency_ms[m.k] = (t_recv - m.t_sensor) * 1e3
             tr.step_ms[m.k] = m.step_ms

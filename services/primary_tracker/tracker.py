@@ -20,6 +20,7 @@ from tltrack.config import Config
 from tltrack.filters.base import Estimate
 from tltrack.filters.particle import warm_up
 from tltrack.messages import EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.models.base import Layout
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, wire_covariance
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -173,8 +174,9 @@ class PrimaryTracker:
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
         used = ep.tracker.used_transfer
-        self._publish(e, "tl", ep.tracker.tl_name, k, t_sensor, tl, used, step_ms)
-        self._publish(e, "isolated", ep.tracker.iso_name, k, t_sensor, iso, False, step_ms)
+        layout = ep.tracker.layout
+        self._publish(e, "tl", ep.tracker.tl_name, layout, k, t_sensor, tl, used, step_ms)
+        self._publish(e, "isolated", ep.tracker.iso_name, layout, k, t_sensor, iso, False, step_ms)
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
         if ep.tracker.rolled_back:
@@ -185,6 +187,7 @@ class PrimaryTracker:
         e: str,
         role: str,
         name: str,
+        layout: Layout,
         k: int,
         t_sensor: float,
         est: Estimate,
@@ -200,6 +203,7 @@ class PrimaryTracker:
                 t_sensor=t_sensor,
                 filter=name,
                 x=est.mean[0],
+                pos=layout.position(est.mean[0]),
                 P=wire_covariance(est.cov[0]),
                 transfer_used=used,
                 t_sent=time.time(),

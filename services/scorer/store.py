@@ -19,10 +19,11 @@ CREATE TABLE IF NOT EXISTS episodes (
     episode TEXT PRIMARY KEY, run INTEGER, K INTEGER, config TEXT,
     started REAL, ended REAL, end_reason TEXT);
 CREATE TABLE IF NOT EXISTS truth (
-    episode TEXT, k INTEGER, x TEXT, t_sensor REAL, PRIMARY KEY (episode, k));
+    episode TEXT, k INTEGER, x TEXT, t_sensor REAL, pos TEXT, PRIMARY KEY (episode, k));
 CREATE TABLE IF NOT EXISTS estimates (
     episode TEXT, filter TEXT, k INTEGER, x TEXT, P TEXT, transfer_used INTEGER,
-    t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, PRIMARY KEY (episode, filter, k));
+    t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, pos TEXT,
+    PRIMARY KEY (episode, filter, k));
 CREATE TABLE IF NOT EXISTS service_stats (
     operator TEXT, service TEXT, t REAL, stats TEXT, PRIMARY KEY (operator, service));
 """
@@ -35,6 +36,10 @@ class Store:
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(SCHEMA)
+        for table in ("truth", "estimates"):  # a file from before positions were sent
+            columns = [row[1] for row in self.db.execute(f"PRAGMA table_info({table})")]
+            if "pos" not in columns:
+                self.db.execute(f"ALTER TABLE {table} ADD COLUMN pos TEXT")
         self.db.execute("BEGIN")
 
     def commit(self) -> None:
@@ -57,14 +62,15 @@ class Store:
 
     def truth(self, m: Truth) -> bool:
         cur = self.db.execute(
-            "INSERT OR IGNORE INTO truth VALUES (?,?,?,?)",
-            (m.episode, m.k, json.dumps(m.x), m.t_sensor),
+            "INSERT OR IGNORE INTO truth (episode, k, x, t_sensor, pos) VALUES (?,?,?,?,?)",
+            (m.episode, m.k, json.dumps(m.x), m.t_sensor, json.dumps(m.pos)),
         )
         return cur.rowcount == 1
 
     def estimate(self, m: EstimateMsg, t_recv: float) -> bool:
         cur = self.db.execute(
-            "INSERT OR IGNORE INTO estimates VALUES (?,?,?,?,?,?,?,?,?,?)",
+            "INSERT OR IGNORE INTO estimates (episode, filter, k, x, P, transfer_used,"
+            " t_sensor, t_sent, t_recv, step_ms, pos) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
             (
                 m.episode,
                 m.filter,
@@ -76,6 +82,7 @@ class Store:
                 m.t_sent,
                 t_recv,
                 m.step_ms,
+                json.dumps(m.pos),
             ),
         )
         return cur.rowcount == 1

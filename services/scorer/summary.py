@@ -12,7 +12,6 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
-from tltrack.models.motion import POS
 from tltrack.services.scorer.store import Store
 
 
@@ -31,24 +30,24 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
     names = [e[0] for e in eps]
     K_of = {e[0]: e[2] for e in eps}
     truth = {
-        (ep, k): np.array(json.loads(x))
-        for ep, k, x in store.rows("SELECT episode, k, x FROM truth")
+        (ep, k): np.array(json.loads(pos))
+        for ep, k, pos in store.rows("SELECT episode, k, pos FROM truth WHERE pos IS NOT NULL")
     }
     sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     latency: dict[str, list[float]] = defaultdict(list)
     used: dict[str, int] = defaultdict(int)
     seen: dict[str, set[tuple[str, int]]] = defaultdict(set)
-    for ep, name, k, x, tu, t_sensor, t_recv in store.rows(
-        "SELECT episode, filter, k, x, transfer_used, t_sensor, t_recv FROM estimates"
+    for ep, name, k, pos, tu, t_sensor, t_recv in store.rows(
+        "SELECT episode, filter, k, pos, transfer_used, t_sensor, t_recv FROM estimates"
     ):
         if ep not in K_of:
             continue
         seen[name].add((ep, k))
         latency[name].append((t_recv - t_sensor) * 1e3)
         used[name] += tu
-        if (ep, k) in truth:
-            d = np.array(json.loads(x)) - truth[ep, k]
-            sq[name][k].append(float(d[POS[0]] ** 2 + d[POS[1]] ** 2))
+        if (ep, k) in truth and pos is not None:
+            d = np.array(json.loads(pos)) - truth[ep, k]
+            sq[name][k].append(float(d[0] ** 2 + d[1] ** 2))
     filters = {}
     for name in sorted(seen):
         steps = sorted(sq[name])

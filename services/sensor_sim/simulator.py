@@ -20,8 +20,9 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config, ConfigError, load_config, make_config
-from tltrack.engine.scenario import PRIMARY, simulate
+from tltrack.engine.scenario import simulate
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
+from tltrack.models.from_config import PRIMARY, motion_model
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.services.sensor_sim import replay
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
@@ -80,6 +81,7 @@ class Settings(BaseSettings):
 class Simulator:
     def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
         self.s, self.cfg, self.svc = settings, cfg, svc
+        self.layout = motion_model(cfg).layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)]
         self.recorded = (
             replay.load(settings.replay_csv, self.sensors) if settings.replay_csv else None
@@ -142,8 +144,9 @@ class Simulator:
             t_next += self.period
             t = time.time()
             if truth is not None:
+                x, pos = truth[k], self.layout.position(truth[k])
                 self.svc.publish(
-                    keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t, x=truth[k])
+                    keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t, x=x, pos=pos)
                 )
             for sid in self.sensors:
                 key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)

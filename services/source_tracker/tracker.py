@@ -110,6 +110,7 @@ class SourceTracker:
                 t_sensor=t_sensor,
                 filter=ep.tracker.name,
                 x=est.mean[0],
+                pos=ep.tracker.layout.position(est.mean[0]),
                 P=wire_covariance(est.cov[0]),
                 transfer_used=False,
                 t_sent=time.time(),

@@ -11,7 +11,8 @@ What one "step" is, per name:
 - ``tl-pf``: the TL-PF primary step, the same with the source's transfer as a second likelihood;
 - ``source-pf``: a source step (Algorithm 1): update on its z_k + estimate + predict + the
   predicted-observation moments (eta_hat, P_eta_eta) it transfers;
-- ``numpy-baseline``: the straightforward NumPy SIR of NOTES.md doing the TL-PF primary step:
+- ``numpy-baseline``: the straightforward NumPy SIR of docs/background.md ("peers") doing the
+  TL-PF primary step:
   (5, N) layout, noise as Q_sqrt times ``standard_normal``, log-likelihoods with ``hypot`` and
   ``arctan2``, resampling with ``cumsum`` + ``searchsorted``, then the mean and covariance. It is a
   yardstick, deliberately untuned;
@@ -33,12 +34,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config, make_config
-from tltrack.engine.scenario import PRIMARY, intensity, sensor, simulate
+from tltrack.engine.scenario import simulate
 from tltrack.engine.streams import stream
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.transfer import Primary, Source
-from tltrack.models.measurement import wrap_angle
-from tltrack.models.motion import MotionModel, motion_model
+from tltrack.models.angles import wrap_angle
+from tltrack.models.base import MotionModel
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -46,7 +48,7 @@ NAMES = ("tl-pf", "pf", "source-pf", "numpy-baseline", "stonesoup")
 
 
 class NumpyBaseline:
-    """The plain NumPy SIR of NOTES.md, one run, (n_x, N) layout: the yardstick, not to be tuned."""
+    """The plain NumPy SIR of docs/background.md, one run, (n_x, N): the yardstick, not tuned."""
 
     def __init__(
         self, model: MotionModel, x0_hat: Array, P0: Array, N: int, rng: np.random.Generator
@@ -59,8 +61,9 @@ class NumpyBaseline:
         L = self.model.Q_sqrt
         x = self.model.f(self.x) + L @ self.rng.standard_normal((L.shape[1], self.N))
         logw = np.zeros(self.N)
+        ix, iy = self.model.layout.pos
         for z, R, (sx, sy) in stmts:
-            dx, dy = x[0] - sx, x[2] - sy
+            dx, dy = x[ix] - sx, x[iy] - sy
             d0 = z[0] - np.hypot(dx, dy)
             d1 = wrap_angle(z[1] - np.arctan2(dy, dx))
             P = np.linalg.inv(R)

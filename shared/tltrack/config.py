@@ -1,9 +1,9 @@
 """One validated configuration for every experiment, service and test.
 
-The seed paper's Table 1 is the default preset, ``paper``. NOTES.md explains why a second
-preset, ``arasaratnam-haykin``, exists: the seed prints q2 = 1.75e-2 and P0(omega) = 0.1, which
-look like unit slips of the cubature-KF benchmark it says it copies (q2 = 1.75e-4,
-P0(omega) = 1e-4). Both keep the seed's Q_v form.
+The seed paper's Table 1 is the default preset, ``paper``. docs/background.md ("parameter
+traps") explains why a second preset, ``arasaratnam-haykin``, exists: the seed prints
+q2 = 1.75e-2 and P0(omega) = 0.1, which look like unit slips of the cubature-KF benchmark it says
+it copies (q2 = 1.75e-4, P0(omega) = 1e-4). Both keep the seed's Q_v form.
 
 A configuration is built from a scenario and a preset; any field given explicitly (from a TOML or
 JSON file, or a CLI flag) overrides the preset's value. Unknown fields are refused, so a typo never

@@ -32,8 +32,9 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-SCHEMA_VERSION = 1
-SUPPORTED_VERSIONS = frozenset({1})
+#: 2: Truth and EstimateMsg carry ``pos``, the position in ``x``: the referee needs no state layout
+SCHEMA_VERSION = 2
+SUPPORTED_VERSIONS = frozenset({2})
 
 MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
@@ -168,16 +169,22 @@ class Measurement(Message):
 
 
 class Truth(Message):
-    """The true state x_k (referee data)."""
+    """The true state x_k and its position (referee data)."""
 
     TYPE: ClassVar[str] = "truth"
     type: Literal["truth"] = "truth"
     x: Vector
+    pos: Vector
 
     @field_validator("x")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
         return _check_vector(v, (4, 5), "x")
+
+    @field_validator("pos")
+    @classmethod
+    def _pos_shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (2,), "pos")
 
 
 class Transfer(Message):
@@ -212,12 +219,13 @@ class Transfer(Message):
 
 
 class EstimateMsg(Message):
-    """A filter's posterior mean and covariance at step k."""
+    """A filter's posterior mean and covariance at step k, and the position it estimates."""
 
     TYPE: ClassVar[str] = "estimate"
     type: Literal["estimate"] = "estimate"
     filter: Annotated[str, Field(min_length=1, max_length=64)]
     x: Vector
+    pos: Vector
     P: Matrix
     transfer_used: bool
     t_sent: Timestamp
@@ -227,6 +235,11 @@ class EstimateMsg(Message):
     @classmethod
     def _x_shape(cls, v: list[float]) -> list[float]:
         return _check_vector(v, (4, 5), "x")
+
+    @field_validator("pos")
+    @classmethod
+    def _pos_shape(cls, v: list[float]) -> list[float]:
+        return _check_vector(v, (2,), "pos")
 
     @model_validator(mode="after")
     def _P_ok(self) -> EstimateMsg:

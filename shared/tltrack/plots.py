@@ -17,8 +17,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.models.motion import POS
-
 _STYLE = {"pf": "tab:blue", "ukf": "tab:green", "ckf3": "tab:red", "ckf5": "tab:olive"}
 
 
@@ -60,13 +58,14 @@ def trajectory(
     path: Path,
     title: str = "",
 ) -> Path:
-    """The true path (x_0..x_K) and each filter's estimates for one run (cf. the paper's Fig. 4)."""
+    """The true path and each filter's estimates for one run (cf. the paper's Fig. 4): positions
+    (K + 1, 2) of x_0..x_K, and (K, 2) of each filter's x_hat_1..x_hat_K."""
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
-    ax.plot(truth[:, POS[0]], truth[:, POS[1]], color="black", lw=2, label="truth")
-    ax.plot(truth[0, POS[0]], truth[0, POS[1]], "ko", label="start")
-    ax.plot(truth[-1, POS[0]], truth[-1, POS[1]], "kx", ms=9, label="end")
-    for name, xs in tracks.items():
-        ax.plot(xs[:, POS[0]], xs[:, POS[1]], lw=1, label=name, **_style(name))
+    ax.plot(truth[:, 0], truth[:, 1], color="black", lw=2, label="truth")
+    ax.plot(truth[0, 0], truth[0, 1], "ko", label="start")
+    ax.plot(truth[-1, 0], truth[-1, 1], "kx", ms=9, label="end")
+    for name, xy in tracks.items():
+        ax.plot(xy[:, 0], xy[:, 1], lw=1, label=name, **_style(name))
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_aspect("equal", adjustable="datalim")

@@ -70,6 +70,16 @@ DELTA_AT_DI: dict[tuple[str, int], float] = {
 }
 
 
+KINDS = ["pf", "ukf", "ckf3", "ckf5"]
+S1 = "s1"  #: the label of Scenario 1's job
+LOSS = "loss_"  #: the prefix of the lost-track jobs' labels
+
+
+def s2_label(intensity: int, particles: int = 6000) -> str:
+    """The label of Scenario 2's job at primary intensity I_p and N particles."""
+    return f"s2_ip{intensity}" if particles == 6000 else f"s2_n{particles}"
+
+
 @dataclass(frozen=True)
 class Job:
     label: str
@@ -81,7 +91,7 @@ def loss_jobs(base: Config) -> list[Job]:
     """PF and TL-PF under each preset and truth mode: how often, and why, tracks are lost."""
     return [
         Job(
-            f"loss_{p}_{t}",
+            f"{LOSS}{p}_{t}",
             base.with_(scenario="ct", preset=p, truth=t, particles=6000, primary_intensity=4),
             PF_FILTERS,
         )
@@ -93,7 +103,7 @@ def loss_jobs(base: Config) -> list[Job]:
 def table2_pf_jobs(base: Config) -> list[Job]:
     """Only Table 2's particle-filter rows (the 10,000-run target of the performance issue)."""
     ct = base.with_(scenario="ct", primary_intensity=4)
-    return [Job(f"s2_n{n}", ct.with_(particles=n), PF_FILTERS) for n in PARTICLES]
+    return [Job(s2_label(4, n), ct.with_(particles=n), PF_FILTERS) for n in PARTICLES]
 
 
 def jobs(base: Config) -> list[Job]:
@@ -101,17 +111,17 @@ def jobs(base: Config) -> list[Job]:
     ct = base.with_(scenario="ct", particles=6000)
     out = [
         Job(
-            "s1",
+            S1,
             base.with_(scenario="cv", particles=6000, primary_intensity=4),
             PF_FILTERS + KF_FILTERS[:4],
         )
     ]
     out += [
-        Job(f"s2_ip{i}", ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
+        Job(s2_label(i), ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
         for i in INTENSITIES
     ]
     out += [
-        Job(f"s2_n{n}", ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
+        Job(s2_label(4, n), ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
         for n in PARTICLES
         if n != 6000
     ]
@@ -201,7 +211,7 @@ def table2_pf_report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         _row(["---"] * 6),
     ]
     for n in PARTICLES:
-        d = docs[f"s2_n{n}"]
+        d = docs[s2_label(4, n)]
         iso, tl = d["filters"]["pf"], d["filters"]["tl-pf"]
         r_iso, _, r_tl, _ = TABLE2["pf", n]
         lines.append(
@@ -222,18 +232,12 @@ def table2_pf_report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
     return path
 
 
-def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
-    """Figures plus ``report.md``: each printed number beside ours and the difference."""
-    f = {label: d["filters"] for label, d in docs.items()}
-    s2 = f["s2_ip4"]
-    cfg = docs["s2_ip4"]["config"]
-    runs = cfg["runs"]
+Results = dict[str, dict[str, Any]]  #: job label -> filter name -> its results
+
+
+def table2_section(f: Results) -> list[str]:
+    """Table 2 (Scenario 2, I_p = 4): each filter's RMSE and step time beside the paper's."""
     lines = [
-        "# Reproduction of the seed's Simulation Results",
-        "",
-        f"{runs} Monte-Carlo runs per point (the paper: 10,000); preset `{cfg['preset']}`, "
-        f"truth `{cfg['truth']}`, seed {cfg['seed']}. Difference = ours - paper.",
-        "",
         "## Table 2 (Scenario 2, I_p = 4)",
         "",
         _row(
@@ -254,7 +258,7 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         _row(["---"] * 11),
     ]
     for (kind, n), (r_iso, t_iso, r_tl, t_tl) in TABLE2.items():
-        res = f["s2_ip4"] if n in (None, 6000) else f[f"s2_n{n}"]
+        res = f[s2_label(4, n or 6000)]
         iso, tl = res[kind], res[f"tl-{kind}"]
         points = n or {"ckf3": 10, "ukf": 11, "ckf5": 51}[kind]
         lines.append(
@@ -274,18 +278,26 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
                 ]
             )
         )
-    lines += [
-        "",
+    return lines
+
+
+def rmse_at_k_section(f: Results) -> list[str]:
+    """RMSE(k) at the steps the text quotes, beside the quoted values."""
+    lines = [
         "## RMSE(k) at the steps the text quotes (N = 6000, I_p = 4)",
         "",
         _row(["scenario", "filter", "k", "paper", "ours", "diff"]),
         _row(["---"] * 6),
     ]
     for (scen, name, k), ref in RMSE_AT_K.items():
-        ours = (f["s1"] if scen == "cv" else s2)[name]["rmse_per_step"][k - 1]
+        ours = f[S1 if scen == "cv" else s2_label(4)][name]["rmse_per_step"][k - 1]
         lines.append(_row([scen, name, k, ref, _fmt(ours), _fmt(ours - ref)]))
-    lines += [
-        "",
+    return lines
+
+
+def rmse_against_ip_section(f: Results) -> list[str]:
+    """Every filter's overall RMSE at each primary intensity I_p."""
+    lines = [
         "## Overall RMSE against I_p (N = 6000)",
         "",
         _row(["I_p", *(n for n in PF_FILTERS + KF_FILTERS)]),
@@ -294,48 +306,59 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
     for i in INTENSITIES:
         row = [f"{i}"]
         for name in PF_FILTERS + KF_FILTERS:
-            ours = f[f"s2_ip{i}"][name]["rmse_overall"]
+            ours = f[s2_label(i)][name]["rmse_overall"]
             ref_ip = RMSE_AT_IP.get((name, i))
             row.append(_fmt(ours) + ("" if ref_ip is None else f" (paper {ref_ip:.2f})"))
         lines.append(_row(row))
-    lines += [
-        "",
+    return lines
+
+
+def transfer_gains(f: Results) -> dict[str, list[float]]:
+    """Delta RMSE = RMSE iso - RMSE TL of each filter kind, at each I_p."""
+    return {
+        kind: [
+            f[s2_label(i)][kind]["rmse_overall"] - f[s2_label(i)][f"tl-{kind}"]["rmse_overall"]
+            for i in INTENSITIES
+        ]
+        for kind in KINDS
+    }
+
+
+def gain_section(gains: dict[str, list[float]]) -> list[str]:
+    """The gain of transfer against the intensity gap Delta I, beside the quoted values."""
+    lines = [
         "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s",
         "",
-        _row(["Delta I", "pf", "ukf", "ckf3", "ckf5"]),
+        _row(["Delta I", *KINDS]),
         _row(["---"] * 5),
     ]
-    kinds = ["pf", "ukf", "ckf3", "ckf5"]
-    deltas: dict[str, list[float]] = {k: [] for k in kinds}
-    for i in INTENSITIES:
+    for j, i in enumerate(INTENSITIES):
         row = [f"{i - 1}"]
-        for kind in kinds:
-            d = f[f"s2_ip{i}"][kind]["rmse_overall"] - f[f"s2_ip{i}"][f"tl-{kind}"]["rmse_overall"]
-            deltas[kind].append(d)
+        for kind in KINDS:
             ref_d = DELTA_AT_DI.get((kind, i - 1))
-            row.append(_fmt(d) + ("" if ref_d is None else f" (paper {ref_d:.2f})"))
+            row.append(_fmt(gains[kind][j]) + ("" if ref_d is None else f" (paper {ref_d:.2f})"))
         lines.append(_row(row))
-    lines += [
-        "",
+    return lines
+
+
+def lost_by_job_section(f: Results) -> list[str]:
+    """The share of lost runs of every filter in every job."""
+    names = PF_FILTERS + KF_FILTERS
+    lines = [
         "## Share of runs that lost track (final error > threshold)",
         "",
-        _row(["job", *(n for n in PF_FILTERS + KF_FILTERS)]),
+        _row(["job", *names]),
         _row(["---"] * 9),
     ]
     for label, res in f.items():
-        lines.append(
-            _row(
-                [
-                    label,
-                    *(
-                        f"{res[n]['lost_fraction']:.1%}" if n in res else "–"
-                        for n in PF_FILTERS + KF_FILTERS
-                    ),
-                ]
-            )
-        )
-    lines += [
-        "",
+        cells = (f"{res[n]['lost_fraction']:.1%}" if n in res else "–" for n in names)
+        lines.append(_row([label, *cells]))
+    return lines
+
+
+def lost_by_truth_section(docs: dict[str, dict[str, Any]]) -> list[str]:
+    """Lost runs and RMSE of the PF rows under each preset and truth mode."""
+    lines = [
         "## Lost tracks under each preset and truth mode (N = 6000, I_p = 4)",
         "",
         _row(
@@ -343,9 +366,9 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
         ),
         _row(["---"] * 7),
     ]
-    for label, res in f.items():
-        if label.startswith("loss_"):
-            c = docs[label]["config"]
+    for label, d in docs.items():
+        if label.startswith(LOSS):
+            res, c = d["filters"], d["config"]
             lines.append(
                 _row(
                     [
@@ -357,22 +380,18 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
                     ]
                 )
             )
-    lines += [
-        "",
-        f"Wall time of all jobs: {wall_minutes(docs):.1f} min (the sources of each I_p sweep, "
-        "and a job repeated under another label, computed once).",
-        "",
-        "Figures: ![s1](fig_s1_rmse.png) ![s2](fig_s2_rmse.png) ![ip](fig_rmse_vs_ip.png) "
-        "![delta](fig_delta_rmse.png) ![n](fig_rmse_time_vs_n.png)",
-        "",
-    ]
+    return lines
 
-    plots.rmse_vs_time(docs["s1"], out / "fig_s1_rmse.png", "Scenario 1: RMSE against time")
-    plots.rmse_vs_time(docs["s2_ip4"], out / "fig_s2_rmse.png", "Scenario 2: RMSE against time")
+
+def figures(docs: dict[str, dict[str, Any]], gains: dict[str, list[float]], out: Path) -> list[str]:
+    """The paper's figures, drawn from our runs with its quoted values as references."""
+    f = {label: d["filters"] for label, d in docs.items()}
+    plots.rmse_vs_time(docs[S1], out / "fig_s1_rmse.png", "Scenario 1: RMSE against time")
+    plots.rmse_vs_time(docs[s2_label(4)], out / "fig_s2_rmse.png", "Scenario 2: RMSE against time")
     plots.curves(
         INTENSITIES,
         {
-            n: [f[f"s2_ip{i}"][n]["rmse_overall"] for i in INTENSITIES]
+            n: [f[s2_label(i)][n]["rmse_overall"] for i in INTENSITIES]
             for n in PF_FILTERS + KF_FILTERS
         },
         out / "fig_rmse_vs_ip.png",
@@ -386,19 +405,18 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
     )
     plots.curves(
         [i - 1 for i in INTENSITIES],
-        deltas,
+        gains,
         out / "fig_delta_rmse.png",
         xlabel="Delta I_w = |I_p - I_s|",
         ylabel="Delta RMSE [m]",
         title="Scenario 2: RMSE gain of transfer against Delta I",
         reference={
-            k: [DELTA_AT_DI.get((k, i - 1), float("nan")) for i in INTENSITIES] for k in kinds
+            k: [DELTA_AT_DI.get((k, i - 1), float("nan")) for i in INTENSITIES] for k in KINDS
         },
     )
-    by_n = {n: (s2 if n == 6000 else f[f"s2_n{n}"]) for n in PARTICLES}
     plots.curves(
         PARTICLES,
-        {n: [by_n[p][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
+        {n: [f[s2_label(4, p)][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
         out / "fig_rmse_time_vs_n.png",
         xlabel="particles N_s",
         ylabel="overall RMSE [m]",
@@ -408,9 +426,40 @@ def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
             "tl-pf": [TABLE2["pf", p][2] for p in PARTICLES],
         },
     )
+    return [
+        "Figures: ![s1](fig_s1_rmse.png) ![s2](fig_s2_rmse.png) ![ip](fig_rmse_vs_ip.png) "
+        "![delta](fig_delta_rmse.png) ![n](fig_rmse_time_vs_n.png)",
+    ]
+
+
+def report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
+    """Figures plus ``report.md``: each printed number beside ours and the difference."""
+    f = {label: d["filters"] for label, d in docs.items()}
+    cfg = docs[s2_label(4)]["config"]
+    gains = transfer_gains(f)
+    sections = [
+        [
+            "# Reproduction of the seed's Simulation Results",
+            "",
+            f"{cfg['runs']} Monte-Carlo runs per point (the paper: 10,000); preset "
+            f"`{cfg['preset']}`, truth `{cfg['truth']}`, seed {cfg['seed']}. "
+            "Difference = ours - paper.",
+        ],
+        table2_section(f),
+        rmse_at_k_section(f),
+        rmse_against_ip_section(f),
+        gain_section(gains),
+        lost_by_job_section(f),
+        lost_by_truth_section(docs),
+        [
+            f"Wall time of all jobs: {wall_minutes(docs):.1f} min (the sources of each I_p "
+            "sweep, and a job repeated under another label, computed once)."
+        ],
+        figures(docs, gains, out),
+    ]
     path = out / "report.md"
-    path.write_text("\n".join(lines))
-    (out / "summary.json").write_text(json.dumps({k: d["filters"] for k, d in docs.items()}))
+    path.write_text("\n\n".join("\n".join(s) for s in sections) + "\n")
+    (out / "summary.json").write_text(json.dumps(f))
     return path
 
 

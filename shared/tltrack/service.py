@@ -4,7 +4,8 @@ inbox, and its statistics.
 A service's life: parse settings (environment and flags; a bad one exits with the field named),
 open a session with ``with``, subscribe, *then* declare its liveliness token (so anyone who sees it
 alive knows its subscriptions are in place), loop on its inbox until SIGTERM/SIGINT, and close
-everything on the way out (NOTES.md: an unclosed session with a callback subscriber hangs).
+everything on the way out (an unclosed session with a callback subscriber hangs:
+docs/background.md, "Zenoh").
 """
 
 from __future__ import annotations

@@ -21,8 +21,8 @@ from tltrack import plots
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import FilterResult, run_experiment
 from tltrack.engine.pcrlb import pcrlb
-from tltrack.engine.scenario import PRIMARY, intensity, sensor, truth
-from tltrack.models.motion import motion_model
+from tltrack.engine.scenario import truth
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 FAULTS = ["none", "bias", "diverged", "stale"]
 BUDGETS = [0.05, 0.1, 0.25, 0.5, 0.75, 1.0]

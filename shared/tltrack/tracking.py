@@ -18,7 +18,7 @@ import numpy as np
 from tltrack.config import Config
 from tltrack.engine.montecarlo import reported_name
 from tltrack.engine.registry import build, parse, recovery
-from tltrack.engine.scenario import PRIMARY, initial_estimate, intensity, sensor
+from tltrack.engine.scenario import initial_estimate
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
@@ -30,7 +30,7 @@ from tltrack.messages import (
     RejectCounter,
     Transfer,
 )
-from tltrack.models.motion import motion_model
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
 from tltrack.transport import Received, decode_received
 
@@ -72,6 +72,7 @@ class SourceEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
         self.cfg, self.source_id = cfg, source_id
+        self.layout = motion_model(cfg).layout
         spec = parse(f"source-{kind}")
         self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
         s = sensor(cfg, source_id)
@@ -93,6 +94,7 @@ class PrimaryEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
+        self.layout = motion_model(cfg).layout
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
         policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget) if robust else None
         self.iso = Primary(

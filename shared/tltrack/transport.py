@@ -1,7 +1,7 @@
 """Zenoh plumbing: settings, sessions, queued subscribers, blocking publishers, liveliness, router.
 
 All services talk through one Python-hosted router (``tltrack router`` / :func:`run_router`);
-NOTES.md, section "Zenoh", lists the measured behaviour this module relies on:
+docs/background.md, section "Zenoh", lists the measured behaviour this module relies on:
 
 - clients connect to explicit endpoints with ``connect/timeout_ms: -1`` (wait for the router) and
   multicast scouting off (it does not cross container boundaries);

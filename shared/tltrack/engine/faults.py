@@ -1,7 +1,7 @@
 """Faulty sources, for robustness studies: the paper assumes an honest, better source.
 
-- ``bias``: the source's bearings carry a constant bias of 10 sigma of its own noise, so its
-  transfers are confidently wrong (a lying or miscalibrated source);
+- ``bias``: the source's sensor is miscalibrated by 10 sigma of its own noise, in the component
+  its kind's miscalibration shifts (a radar's bearing), so its transfers are confidently wrong;
 - ``diverged``: the source tracks a ghost: its measurements follow the truth shifted by an offset
   growing 3 m per step in x and y, as a source that lost the target and locked onto clutter;
 - ``stale``: its transfers arrive :data:`STALE_LAG` steps late but labelled as current.
@@ -15,7 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.models.motion import POS
+from tltrack.models.base import MeasurementModel
+from tltrack.models.from_config import motion_model
 
 BIAS_SIGMAS = 10.0
 GHOST_DRIFT_M = 3.0  #: per step, in x and in y
@@ -34,16 +35,19 @@ def observed_truth(cfg: Config, sensor_id: str, x: Array) -> Array:
         return x
     ghost = x.copy()
     drift = GHOST_DRIFT_M * np.arange(len(x))
-    ghost[:, POS[0]] += drift
-    ghost[:, POS[1]] += drift
+    ix, iy = motion_model(cfg).layout.pos
+    ghost[:, ix] += drift
+    ghost[:, iy] += drift
     return ghost
 
 
-def bearing_bias(cfg: Config, sensor_id: str, intensity: float) -> float:
-    """The constant bearing bias [rad] of a biased source, else 0."""
+def miscalibration(
+    cfg: Config, sensor_id: str, sensor: MeasurementModel, intensity: float
+) -> Array | None:
+    """The constant offset of a biased source's measurements, else None."""
     if _fault(cfg, sensor_id) != "bias":
-        return 0.0
-    return BIAS_SIGMAS * cfg.sigma_bearing * float(np.sqrt(intensity))
+        return None
+    return sensor.miscalibration(BIAS_SIGMAS, intensity)
 
 
 def transfer_lag(cfg: Config, sensor_id: str) -> int:

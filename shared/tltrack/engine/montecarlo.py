@@ -25,12 +25,13 @@ from numpy.typing import NDArray
 from tltrack.config import Config
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, build, parse, recovery
-from tltrack.engine.scenario import PRIMARY, intensity, sensor, simulate
+from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.particle import warm_up
 from tltrack.filters.transfer import Primary, Source
-from tltrack.models.motion import POS, MotionModel, motion_model
+from tltrack.models.base import Layout, MotionModel
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -88,14 +89,15 @@ def nees(d: Array, P: Array) -> Array:
 class _Score:
     """Accumulates one filter's errors against the truth of a batch."""
 
-    def __init__(self, K: int, keep_tracks: bool) -> None:
+    def __init__(self, K: int, layout: Layout, keep_tracks: bool) -> None:
         self.stats = FilterStats(K)
+        self.pos = layout.pos
         self._sq: list[Array] = []
         self._means: list[Array] | None = [] if keep_tracks else None
 
     def add(self, k: int, est: Estimate, truth_k: Array) -> None:
         d = est.mean - truth_k  # (B, n)
-        e2 = d[:, POS[0]] ** 2 + d[:, POS[1]] ** 2
+        e2 = d[:, self.pos[0]] ** 2 + d[:, self.pos[1]] ** 2
         self.stats.sq_err[k - 1] += e2.sum()
         self.stats.nees[k - 1] += nees(d, est.cov).sum()
         self._sq.append(e2)
@@ -163,7 +165,7 @@ def run_sweep_batch(
     x0_hat = np.stack([s.x0_hat for s in sims[0]], axis=1)  # (n, B)
     truth = np.stack([s.truth for s in sims[0]], axis=1)  # (K + 1, B, n)
     source_ids = [s.id for s in cfg.sources]
-    z_src = {i: np.stack([s.z[i] for s in sims[0]], axis=2) for i in source_ids}  # (K, 2, B)
+    z_src = {i: np.stack([s.z[i] for s in sims[0]], axis=2) for i in source_ids}  # (K, n_z, B)
     meas = {i: (sensor(cfg, i), sensor(cfg, i).R(intensity(cfg, i))) for i in source_ids}
 
     def observation(sensor_id: str, k: int) -> Observation:
@@ -178,7 +180,9 @@ def run_sweep_batch(
             for sid in source_ids:
                 filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
                 sources[spec.name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
-                source_scores[reported_name(spec, sid, len(source_ids))] = _Score(K, keep_tracks)
+                source_scores[reported_name(spec, sid, len(source_ids))] = _Score(
+                    K, model.layout, keep_tracks
+                )
     variants = [
         _PrimaryVariant(c, [s.z[PRIMARY] for s in sim], specs, model, x0_hat, runs, keep_tracks)
         for c, sim in zip(cfgs, sims, strict=True)
@@ -232,7 +236,7 @@ class _PrimaryVariant:
     ) -> None:
         self.sensor = sensor(cfg)
         self.R = self.sensor.R(intensity(cfg))
-        self.z = np.stack(z, axis=2)  # (K, 2, B)
+        self.z = np.stack(z, axis=2)  # (K, n_z, B)
         self.primaries: dict[str, tuple[FilterSpec, Primary]] = {}
         self.scores: dict[str, _Score] = {}
         for spec in specs:
@@ -249,7 +253,7 @@ class _PrimaryVariant:
                 iso = build(parse(spec.kind), cfg, model, x0_hat, runs)
                 twin = Primary(iso, None, recovery(spec, cfg))
             self.primaries[spec.name] = (spec, Primary(filt, policy, recovery(spec, cfg), twin))
-            self.scores[spec.name] = _Score(cfg.K, keep_tracks)
+            self.scores[spec.name] = _Score(cfg.K, model.layout, keep_tracks)
 
     def step(
         self,

@@ -27,7 +27,7 @@ from tltrack.filters.base import Filter
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.recovery import Recovery
 from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, unscented
-from tltrack.models.motion import MotionModel
+from tltrack.models.base import MotionModel
 
 Kind = Literal["pf", "ukf", "ckf3", "ckf5"]
 Role = Literal["isolated", "tl", "robust", "source", "fusion"]

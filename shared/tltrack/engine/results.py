@@ -15,8 +15,8 @@ import tltrack
 from tltrack.config import Config
 from tltrack.engine.montecarlo import FilterResult
 from tltrack.engine.pcrlb import pcrlb
-from tltrack.engine.scenario import PRIMARY, intensity, sensor, truth
-from tltrack.models.motion import motion_model
+from tltrack.engine.scenario import truth
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 SCHEMA_VERSION = 1
 

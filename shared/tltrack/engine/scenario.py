@@ -1,7 +1,8 @@
 """Truth trajectories, sensor measurements and initial estimates for one Monte-Carlo run.
 
 The seed says only that its trajectory is "identical to the simulation realization" of earlier
-papers; NOTES.md shows the RMSE depends heavily on how it was drawn, so all three readings exist:
+papers; the RMSE depends heavily on how it was drawn (docs/background.md, "the truth"), so all
+three readings exist:
 
 - ``fixed``: one realization from ``truth_seed``, shared by every run (the default);
 - ``random``: a fresh realization per run;
@@ -19,28 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.faults import bearing_bias, observed_truth
+from tltrack.engine.faults import miscalibration, observed_truth
 from tltrack.engine.streams import stream
-from tltrack.models.measurement import RangeBearing, wrap_angle
-from tltrack.models.motion import motion_model
+from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 Array = NDArray[np.float64]
-
-PRIMARY = "primary"
-
-
-def sensor(cfg: Config, sensor_id: str = PRIMARY) -> RangeBearing:
-    """The range-bearing model of the primary or of the source with that id."""
-    pos = cfg.primary_position
-    if sensor_id != PRIMARY:
-        pos = next(s.position for s in cfg.sources if s.id == sensor_id)
-    return RangeBearing(cfg.sigma_r, cfg.sigma_bearing, pos)
-
-
-def intensity(cfg: Config, sensor_id: str = PRIMARY) -> float:
-    if sensor_id == PRIMARY:
-        return cfg.primary_intensity
-    return next(s.intensity for s in cfg.sources if s.id == sensor_id)
 
 
 def truth(cfg: Config, run: int) -> Array:
@@ -64,14 +48,12 @@ def truth(cfg: Config, run: int) -> Array:
 
 
 def measurements(cfg: Config, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:
-    """z_1..z_K of one sensor along truth ``x``, shape (K, 2), bearing wrapped to (-pi, pi]."""
+    """z_1..z_K of one sensor along truth ``x``, shape (K, n_z), angles wrapped to (-pi, pi]."""
     s = sensor(cfg, sensor_id)
     I_w = intensity(cfg, sensor_id)
-    L = np.linalg.cholesky(s.R(I_w))
-    eps = stream(cfg.seed, run, f"meas/{sensor_id}").standard_normal((cfg.K, 2))
-    z = s.h(observed_truth(cfg, sensor_id, x)[1:].T).T + eps @ L.T
-    z[:, 1] = wrap_angle(z[:, 1] + bearing_bias(cfg, sensor_id, I_w))
-    return z
+    g = stream(cfg.seed, run, f"meas/{sensor_id}")
+    seen = observed_truth(cfg, sensor_id, x)[1:]
+    return s.draw(seen, I_w, g, miscalibration(cfg, sensor_id, s, I_w))
 
 
 def initial_estimate(cfg: Config, run: int) -> Array:
@@ -86,7 +68,7 @@ class Run:
 
     run: int
     truth: Array  # (K + 1, n_x)
-    z: dict[str, Array]  # sensor id -> (K, 2)
+    z: dict[str, Array]  # sensor id -> (K, n_z)
     x0_hat: Array  # (n_x,)
 
 

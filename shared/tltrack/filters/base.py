@@ -9,7 +9,7 @@ from typing import Protocol, Self
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.models.measurement import RangeBearing
+from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -35,7 +35,7 @@ class Filter(Protocol):
     def estimate(self) -> Estimate:
         """The current posterior's mean and covariance."""
 
-    def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
+    def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
         """Moments of eta = h(x) + w under the current (predicted) state density."""
 
     def adopt(self, other: Self, runs: NDArray[np.bool_]) -> None:

@@ -45,15 +45,26 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from tltrack.models.base import MeasurementModel, PositionFix
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
 
 
+def position_fix(sensor: MeasurementModel) -> PositionFix:
+    """``sensor`` as a :class:`PositionFix`; a ``TypeError`` naming its kind if it fixes none."""
+    if not isinstance(sensor, PositionFix):
+        raise TypeError(
+            f"robust transfer compares positions, and a {sensor.kind} sensor's measurement "
+            "fixes none"
+        )
+    return sensor
+
+
 def disagreement(transfer: Observation, z: Observation) -> tuple[Array, Array]:
     """d_k (B, 2) and S_k (B, 2, 2) between a transfer and the primary's z_k, in x-y."""
-    p_t, S_t = transfer.sensor.to_position(transfer.mean, transfer.cov)
-    p_z, S_z = z.sensor.to_position(z.mean, z.cov)
+    p_t, S_t = position_fix(transfer.sensor).to_position(transfer.mean, transfer.cov)
+    p_z, S_z = position_fix(z.sensor).to_position(z.mean, z.cov)
     return (p_t - p_z).T, S_t + S_z
 
 
@@ -142,7 +153,9 @@ class TransferPolicy:
                 self.forget |= taught & ~self._consistent(w, n, self.rollback_probability)
                 mean_nis, d_bar, S_bar = w
                 temper = np.maximum(1.0, mean_nis / (chi2.ppf(self.temper_quantile, 2 * n) / n))
-                bias = t.sensor.from_position(t.mean, bias_second_moment(d_bar, S_bar, n))
+                bias = position_fix(t.sensor).from_position(
+                    t.mean, bias_second_moment(d_bar, S_bar, n)
+                )
                 cov = t.cov * temper[:, None, None] + bias
             judged.append((origin, t, keep, cov))
         out = []

@@ -11,13 +11,12 @@ product underflows in linear space still normalise (no 0/0).
 
 Particles are stored ``(n_x, B, N)``: each state component of each run is one contiguous row.
 
-Speed: the coordinated-turn and constant-velocity models (by exact type), range-bearing sensors
-(by exact type), systematic resampling and the moments run as numba kernels
-(:mod:`tltrack.filters.kernels`). Any other motion model or sensor takes the generic NumPy path,
-with the same random numbers. Each step draws, from each run's own generator and in this order:
-``uniforms_per_run(r, N)`` uniforms in ``predict`` (made into the r = rank(Q_v) Gaussians per
-particle by Box-Muller), then one uniform in ``update`` (the systematic offset). A run's numbers
-therefore never depend on the batch size.
+Speed: the motion models and sensors that :mod:`tltrack.filters.fastpath` lists, systematic
+resampling and the moments run as numba kernels (:mod:`tltrack.filters.kernels`). Any other
+motion model or sensor takes the generic NumPy path, with the same random numbers. Each step
+draws, from each run's own generator and in this order: ``uniforms_per_run(r, N)`` uniforms in
+``predict`` (made into the r = rank(Q_v) Gaussians per particle by Box-Muller), then one uniform
+in ``update`` (the systematic offset). A run's numbers therefore never depend on the batch size.
 
 ``update`` does not write the resampled cloud out: it keeps the ancestor indices, the next
 ``predict`` propagates through them, and ``estimate`` takes the resampled cloud's moments from the
@@ -32,10 +31,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.filters import kernels
+from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
-from tltrack.models.measurement import RangeBearing
-from tltrack.models.motion import POS, ConstantVelocity, CoordinatedTurn, MotionModel
+from tltrack.filters.kernels import gaussians, moments, propagation, resample
+from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -44,22 +43,17 @@ Array = NDArray[np.float64]
 def gaussian_loglik(obs: Observation, x: Array) -> Array:
     """log N(obs.mean; h(x), obs.cov) up to a per-run constant, (B, N) (eq. TL_tr_likelihood_2).
 
-    The generic path, for any sensor with ``h`` and ``residual``; range-bearing sensors use
-    :func:`tltrack.filters.kernels.rb_loglik`, which computes the same quantity.
+    The generic path, for any sensor; a sensor with compiled kernels (:mod:`~.fastpath`) computes
+    the same quantity there.
     """
-    d = obs.sensor.residual(obs.mean[:, :, None], obs.sensor.h(x))  # (2, B, N)
-    Pinv = np.linalg.inv(obs.cov)  # (B, 2, 2)
-    a = Pinv[:, 0, 0, None]
-    b = Pinv[:, 0, 1, None]
-    c = Pinv[:, 1, 1, None]
-    rho = -0.5 * (a * d[0] * d[0] + 2.0 * b * d[0] * d[1] + c * d[1] * d[1])
+    d = obs.sensor.residual(obs.mean[:, :, None], obs.sensor.h(x))  # (n_z, B, N)
+    rho = -0.5 * np.einsum("ibn,bij,jbn->bn", d, np.linalg.inv(obs.cov), d)
     if obs.mask is not None:
         rho = np.where(obs.mask[:, None], rho, 0.0)
     return rho
 
 
-def _f64(a: Array) -> Array:
-    return np.ascontiguousarray(a, dtype=np.float64)
+_f64 = fastpath.f64
 
 
 class ParticleFilter:
@@ -92,14 +86,11 @@ class ParticleFilter:
         L = np.asarray(model.Q_sqrt, dtype=np.float64)
         self._L = _f64(L)
         self._r = L.shape[1]
-        self._motion = self._motion_kind(model, L)
-        self._U1 = np.empty((1, kernels.uniforms_per_run(self._r, self.N)))  # one run's uniforms
-        self._A = _f64(model.A) if isinstance(model, ConstantVelocity) else np.eye(n)
-        self._e = np.empty((self._r, self.N))  # one run's Gaussians, scratch shared by the batch
-        self._g = np.empty((n, kernels.BLOCK))  # a block of resampled particles (scratch)
+        self._propagate = fastpath.propagator(model, self.N)
+        self._U1 = np.empty((1, gaussians.uniforms_per_run(self._r, self.N)))  # one run's
+        self._sensor_kernels: dict[type, fastpath.SensorKernels | None] = {}
         self._logw = np.empty((B, self.N))
         self._u = np.empty(B)  # this step's systematic offsets
-        self._packs: dict[int, tuple[Array, Array, Array, NDArray[np.bool_]]] = {}
         self._anc = np.empty((B, self.N + 1), dtype=np.int64)  # ancestors (+ a scratch column)
         self._pre: Array | None = None  # the cloud before resampling, while x is not gathered
         self._moments: tuple[Array, Array] | None = None  # of the resampled cloud, from update()
@@ -125,18 +116,10 @@ class ParticleFilter:
         """The current cloud, gathered from (pre-resampling cloud, ancestors) if need be."""
         if self._pre is not None:
             out = np.empty_like(self._pre)
-            kernels.gather(self._pre, self._anc, out)
+            propagation.gather(self._pre, self._anc, out)
             out.flags.writeable = False
             self._x, self._pre = out, None
         return self._x
-
-    @staticmethod
-    def _motion_kind(model: MotionModel, L: Array) -> str:
-        if type(model) is CoordinatedTurn and L.shape == (5, 3):
-            return "ct"
-        if type(model) is ConstantVelocity and L.shape == (4, 2):
-            return "cv"
-        return "generic"
 
     @property
     def batch(self) -> int:
@@ -154,7 +137,7 @@ class ParticleFilter:
         The generic path uses it, and it lets tests reproduce the fast path's numbers exactly.
         """
         E = np.empty((self.batch, self._r, self.N))
-        kernels.gaussians(self._draw_uniforms(), E)
+        gaussians.gaussians(self._draw_uniforms(), E)
         return E.transpose(1, 0, 2)
 
     def predict(self) -> None:
@@ -164,68 +147,53 @@ class ParticleFilter:
         else:  # not resampled yet (the first step): every particle is its own ancestor
             src, anc = self._x, self._anc
             anc[:] = np.arange(self.N + 1)
-        if self._motion == "generic" or src.dtype != np.float64 or not src.flags.c_contiguous:
+        if self._propagate is None or src.dtype != np.float64 or not src.flags.c_contiguous:
             x = self._cloud()
             self.x = self.model.f(x) + np.tensordot(self._L, self.gaussians(), axes=1)
             return
         out = np.empty_like(src)
-        m = self.model
         # Run by run: a run's uniforms are drawn into one reused row, still in cache when read
         U = self._U1
         for b, g in enumerate(self.rngs):
             g.random(out=U[0])
-            if self._motion == "ct":
-                assert isinstance(m, CoordinatedTurn)
-                kernels.ct_predict(
-                    src, anc, U, self._e, self._g, float(m.T), float(m.SMALL), self._L, out, b
-                )
-            else:
-                kernels.cv_predict(src, anc, U, self._e, self._g, self._A, self._L, out, b)
+            self._propagate(src, anc, U, out, b)
         self.x = out
+
+    def _kernels(self, sensor: MeasurementModel) -> fastpath.SensorKernels | None:
+        if type(sensor) not in self._sensor_kernels:
+            self._sensor_kernels[type(sensor)] = fastpath.sensor_kernels(sensor, self.batch)
+        return self._sensor_kernels[type(sensor)]
 
     def _split(
         self, observations: Sequence[Observation]
-    ) -> tuple[tuple[Array, Array, Array, NDArray[np.bool_]] | None, list[Observation]]:
-        """The range-bearing statements packed for the kernels, and the others (generic path)."""
-        fast = self._x.dtype == np.float64 and self._x.flags.c_contiguous
-        rb: list[Observation] = []
+    ) -> tuple[tuple[fastpath.SensorKernels, list[Observation]] | None, list[Observation]]:
+        """The statements one compiled kernel takes (the first sensor type that has one, in one
+        layout), and the others (generic path)."""
+        if not (self._x.dtype == np.float64 and self._x.flags.c_contiguous):
+            return None, list(observations)
+        fast: list[Observation] = []
         others: list[Observation] = []
+        kernels = None
         for o in observations:
-            (
-                rb if fast and type(o.sensor) is RangeBearing and o.mean.shape[0] == 2 else others
-            ).append(o)
-        if not rb:
-            return None, others
-        pos, mean, cov, mask = packed = self._packing(len(rb))
-        for j, o in enumerate(rb):
-            pos[j, 0], pos[j, 1] = o.sensor.position
-            mean[j] = o.mean
-            cov[j] = o.cov
-            mask[j] = True if o.mask is None else o.mask
-        return packed, others
+            if not fast and (k := self._kernels(o.sensor)) is not None:
+                kernels = k
+                fast.append(o)
+            elif fast and type(o.sensor) is type(fast[0].sensor) and _same_layout(o, fast[0]):
+                fast.append(o)
+            else:
+                others.append(o)
+        return (None if kernels is None else (kernels, fast)), others
 
     def _loglik_into(self, observations: Sequence[Observation], logw: Array) -> None:
         """Write the sum of every observation's log-likelihood into ``logw`` (B, N)."""
         x = self._cloud()
-        packed, others = self._split(observations)
-        if packed is not None:
-            kernels.rb_loglik(x, POS[0], POS[1], *packed, logw)
+        fast, others = self._split(observations)
+        if fast is not None:
+            fast[0].loglik(x, fast[1], logw)
         else:
             logw[...] = 0.0
         for o in others:
             logw += gaussian_loglik(o, x)
-
-    def _packing(self, M: int) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
-        """Reused buffers (positions, means, covariances, masks) for M range-bearing statements."""
-        if M not in self._packs:
-            B = self.batch
-            self._packs[M] = (
-                np.empty((M, 2)),
-                np.empty((M, 2, B)),
-                np.empty((M, B, 2, 2)),
-                np.empty((M, B), dtype=np.bool_),
-            )
-        return self._packs[M]
 
     def log_weights(self, observations: Sequence[Observation]) -> Array:
         """Unnormalised log-weights (B, N): the sum of every observation's log-likelihood."""
@@ -248,14 +216,13 @@ class ParticleFilter:
         mean = np.empty((B, n))
         cov = np.empty((B, n, n))
         ok = np.empty(B, dtype=np.bool_)
-        packed, others = self._split(observations)
-        if packed is not None and not others:  # likelihood and resampling fused, run by run
-            good = kernels.rb_update(
-                x, POS[0], POS[1], *packed, u, self._anc, mean, cov, ok, self._logw[0]
-            )
+        fast, others = self._split(observations)
+        if fast is not None and not others:  # likelihood and resampling fused, run by run
+            kernels, obs = fast
+            good = kernels.update(x, obs, u, self._anc, mean, cov, ok, self._logw[0])
         else:
             self._loglik_into(observations, self._logw)
-            good = kernels.resample(self._logw, u, x, self._anc, mean, cov, ok)
+            good = resample.resample(self._logw, u, x, self._anc, mean, cov, ok)
         if good < B:
             bad = ~ok
             x = x.copy()  # the caller's array stays as it was
@@ -275,7 +242,7 @@ class ParticleFilter:
             n, B = self._x.shape[0], self.batch
             mean = np.empty((B, n))
             cov = np.empty((B, n, n))
-            kernels.moments(_f64(self._cloud()), mean, cov)
+            moments.moments(_f64(self._cloud()), mean, cov)
         return Estimate(mean.copy(), cov + self.model.Q)
 
     def adopt(self, other: ParticleFilter, runs: NDArray[np.bool_]) -> None:
@@ -284,25 +251,25 @@ class ParticleFilter:
         x[:, runs, :] = other.x[:, runs, :]
         self.x = x
 
-    def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
+    def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
         """eta_hat and P_eta_eta from the propagated cloud (seed eqs. BTL_sr_pred_obser_mean/cov).
 
-        The bearing's mean is circular, and deviations are wrapped, as tracks cross the +-pi cut.
+        Angles' means are circular, and their deviations wrapped, as tracks cross the +-pi cut.
         """
-        if type(sensor) is RangeBearing:
-            B = self.batch
-            eta = np.empty((2, B))
-            cov = np.empty((B, 2, 2))
-            sx, sy = sensor.position
-            kernels.rb_predicted_obs(
-                _f64(self._cloud()), POS[0], POS[1], float(sx), float(sy), eta, cov
-            )
+        kernels = self._kernels(sensor)
+        x = self._cloud()
+        if kernels is not None:
+            eta, cov = kernels.predicted_observation(_f64(x), sensor)
             return Observation(sensor, eta, cov + R)
-        Z = sensor.h(self._cloud())  # (2, B, N)
-        eta = sensor.mean(Z, axis=2)  # (2, B)
+        Z = sensor.h(x)  # (n_z, B, N)
+        eta = sensor.mean(Z, axis=2)  # (n_z, B)
         d = sensor.residual(Z, eta[:, :, None])
         cov = np.einsum("ibn,jbn->bij", d, d) / self.N + R
         return Observation(sensor, eta, cov)
+
+
+def _same_layout(a: Observation, b: Observation) -> bool:
+    return bool(getattr(a.sensor, "layout", None) == getattr(b.sensor, "layout", None))
 
 
 def warm_up() -> None:
@@ -314,9 +281,8 @@ def warm_up() -> None:
     from tltrack.filters.resampling import systematic_indices
 
     rngs = [np.random.default_rng(0)]
-    sensor = RangeBearing(10.0, 0.01)
-    z = Observation.broadcast(sensor, np.array([1500.0, 0.5]), sensor.R(1.0))
-    for model in (CoordinatedTurn(T=1.0, q1=0.1, q2=1e-4), ConstantVelocity(T=1.0, q=0.1)):
+    for model, sensor in fastpath.examples():
+        z = Observation.broadcast(sensor, sensor.h(np.full(model.n, 1000.0)), sensor.R(1.0))
         n = model.n
         x0 = np.full((n, 1), 1000.0)
         pf = ParticleFilter(model, x0, np.eye(n), 8, rngs)

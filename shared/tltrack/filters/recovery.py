@@ -4,13 +4,14 @@ With the transition prior as proposal and little process noise, a cloud that has
 from the object never comes back: every particle explains the measurement equally badly. The test
 is on the primary's own measurement, before the update:
 
-    lost  <=>  min_i (z_k - h(x_k^(i)))' Q_w^-1 (z_k - h(x_k^(i)))  >  chi2_2^{-1}(1 - 1e-9) ~ 41.4
+    lost  <=>  min_i (z_k - h(x_k^(i)))' Q_w^-1 (z_k - h(x_k^(i)))  >  chi2_{n_z}^{-1}(1 - 1e-9)
 
 (also when the cloud holds a non-finite value), or when z_k alone would leave fewer than
 ``min_ess`` effective particles: the weights of all but one underflow, as after a long outage
-whose predictions spread the cloud thin. A lost run's particles are redrawn around the
-position that z_k implies (its linearised covariance), keeping the velocity and turn rate of the
-previous mean with the spread of P0. The paper's experiments keep it off, so lost runs count.
+whose predictions spread the cloud thin. A lost run's particles are redrawn with the spread of P0
+around the previous mean, and, when the sensor's measurement fixes a position
+(:class:`~tltrack.models.base.PositionFix`), with their position drawn around the one z_k implies
+(its linearised covariance). The paper's experiments keep it off, so lost runs count.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from tltrack.filters.particle import ParticleFilter
-from tltrack.models.motion import POS
+from tltrack.models.base import PositionFix
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -38,18 +39,13 @@ class Recovery:
     count: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def lost(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
-        d = z.sensor.residual(z.mean[:, :, None], z.sensor.h(pf.x))  # (2, B, N)
-        W = np.linalg.inv(z.cov)
-        nis = (
-            W[:, 0, 0, None] * d[0] ** 2
-            + 2 * W[:, 0, 1, None] * d[0] * d[1]
-            + W[:, 1, 1, None] * d[1] ** 2
-        )
+        d = z.sensor.residual(z.mean[:, :, None], z.sensor.h(pf.x))  # (n_z, B, N)
+        nis = np.einsum("ibn,bij,jbn->bn", d, np.linalg.inv(z.cov), d)
         nis = np.where(np.isfinite(nis), nis, np.inf)
         best = np.min(nis, axis=1)
         w = np.exp(-0.5 * (nis - best[:, None]))
         ess = w.sum(axis=1) ** 2 / (w**2).sum(axis=1)
-        return ~((best <= chi2.ppf(1.0 - self.tail, 2)) & (ess >= self.min_ess))
+        return ~((best <= chi2.ppf(1.0 - self.tail, z.sensor.n_z)) & (ess >= self.min_ess))
 
     def __call__(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
         """Reinitialise the lost runs of ``pf`` around ``z``; returns which were."""
@@ -63,11 +59,13 @@ class Recovery:
 
     def _redraw(self, pf: ParticleFilter, z: Observation, b: int) -> None:
         g = pf.rngs[b]
-        pos, S = z.sensor.to_position(z.mean[:, b : b + 1], z.cov[b : b + 1])
         finite = np.all(np.isfinite(pf.x[:, b, :]), axis=0)
         mean = pf.x[:, b, finite].mean(axis=1) if finite.any() else np.zeros(pf.x.shape[0])
         L = np.linalg.cholesky(self.P0)
         x = mean[:, None] + L @ g.standard_normal((pf.x.shape[0], pf.N))
-        p = pos[:, 0, None] + np.linalg.cholesky(S[0]) @ g.standard_normal((2, pf.N))
-        x[POS[0]], x[POS[1]] = p[0], p[1]
+        if isinstance(z.sensor, PositionFix):
+            pos, S = z.sensor.to_position(z.mean[:, b : b + 1], z.cov[b : b + 1])
+            p = pos[:, 0, None] + np.linalg.cholesky(S[0]) @ g.standard_normal((2, pf.N))
+            ix, iy = pf.model.layout.pos
+            x[ix], x[iy] = p[0], p[1]
         pf.x[:, b, :] = x

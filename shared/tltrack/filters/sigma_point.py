@@ -25,8 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.filters.base import Estimate
-from tltrack.models.measurement import RangeBearing
-from tltrack.models.motion import MotionModel
+from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -68,7 +67,7 @@ def cubature3(n: int) -> SigmaRule:
 
 
 def cubature5(n: int) -> SigmaRule:
-    """Jia, Xin & Cheng (2013) 5th-degree rule, 2n^2 + 1 points (NOTES.md).
+    """Jia, Xin & Cheng (2013) 5th-degree rule, 2n^2 + 1 points (docs/background.md).
 
     Centre, weight 2/(n+2); +-sqrt(n+2) e_i, weight (4-n)/(2(n+2)^2), negative for n > 4;
     +-sqrt(n+2)(e_k +- e_l)/sqrt(2) for k < l, weight 1/(n+2)^2.
@@ -126,7 +125,7 @@ def _wcov(A: Array, C: Array, w: Array) -> Array:
     return (A * w).transpose(1, 0, 2) @ C.transpose(1, 2, 0)
 
 
-def _moments(sensor: RangeBearing, Z: Array, zref: Array, w: Array) -> tuple[Array, Array]:
+def _moments(sensor: MeasurementModel, Z: Array, zref: Array, w: Array) -> tuple[Array, Array]:
     """Weighted mean (n_z, b) of Z (n_z, b, S), taken relative to zref, and deviations from it."""
     zhat = zref + sensor.residual(Z, zref[..., None]) @ w
     zhat = sensor.residual(zhat, np.zeros_like(zhat))  # angles back into their principal range
@@ -225,7 +224,7 @@ class SigmaPointFilter:
         self.m[:, runs] = other.m[:, runs]
         self.P[runs] = other.P[runs]
 
-    def predicted_observation(self, sensor: RangeBearing, R: Array) -> Observation:
+    def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
         """eta_hat = E[h(x)] and P_eta_eta = Cov[h(x)] + R under the current density: a transfer."""
         runs = np.arange(self.m.shape[1])
         w = self.rule.w

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from tltrack.filters.base import Array, Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
-from tltrack.models.measurement import RangeBearing
+from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
 
 #: Reinitialises the lost runs of a filter around a measurement (see tltrack.filters.recovery).
@@ -33,7 +33,7 @@ class Source:
     """Algorithm 1: ``step(z_k)`` returns the estimate at k and the transfer for k + 1."""
 
     def __init__(
-        self, filt: Filter, sensor: RangeBearing, R: Array, recover: Recover | None = None
+        self, filt: Filter, sensor: MeasurementModel, R: Array, recover: Recover | None = None
     ) -> None:
         self.filter = filt
         self.sensor = sensor

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.models.measurement import RangeBearing
+from tltrack.models.base import MeasurementModel
 
 Array = NDArray[np.float64]
 
@@ -27,14 +27,14 @@ class Observation:
     the source operator of a transfer, so that its record follows it whichever others arrive.
     """
 
-    sensor: RangeBearing
+    sensor: MeasurementModel
     mean: Array
     cov: Array
     mask: NDArray[np.bool_] | None = None
     origin: str | None = None
 
     @classmethod
-    def broadcast(cls, sensor: RangeBearing, mean: Array, cov: Array) -> Observation:
+    def broadcast(cls, sensor: MeasurementModel, mean: Array, cov: Array) -> Observation:
         """From one (n_z,) or (n_z, B) mean and one shared (n_z, n_z) covariance."""
         m = np.asarray(mean, dtype=float)
         if m.ndim == 1:

@@ -1,0 +1,73 @@
+"""What every sensor with additive Gaussian noise shares, given which components are angles.
+
+A concrete sensor subclasses :class:`GaussianSensor` and supplies ``h``, ``H`` and ``R`` (and its
+``kind``, ``components`` and ``angular`` declarations); residuals, sample means and noisy draws
+follow from those.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.models.angles import circular_mean, wrap_angle
+from tltrack.models.base import Layout
+
+Array = NDArray[np.float64]
+
+
+class GaussianSensor:
+    """Generic parts of a :class:`~tltrack.models.base.MeasurementModel`.
+
+    Subclasses are frozen dataclasses with a ``position`` and a ``layout`` field.
+    """
+
+    kind: ClassVar[str]
+    #: each component's name with its unit
+    components: ClassVar[tuple[str, ...]]
+    #: which components are angles (wrapped, circular means)
+    angular: ClassVar[tuple[bool, ...]]
+
+    position: tuple[float, float]
+    layout: Layout
+
+    @property
+    def n_z(self) -> int:
+        return len(self.components)
+
+    def R(self, intensity: float) -> Array:
+        raise NotImplementedError
+
+    def h(self, x: Array) -> Array:
+        raise NotImplementedError
+
+    def residual(self, z: Array, zhat: Array) -> Array:
+        """z - zhat with the angle components wrapped; components on the first axis."""
+        d = np.asarray(z, dtype=float) - zhat
+        for i, is_angle in enumerate(self.angular):
+            if is_angle:
+                d[i] = wrap_angle(d[i])
+        return d
+
+    def mean(self, Z: Array, axis: int) -> Array:
+        """Sample mean of measurements along ``axis``; the angles' is circular."""
+        return np.stack(
+            [
+                circular_mean(Z[i], axis - 1) if is_angle else Z[i].mean(axis=axis - 1)
+                for i, is_angle in enumerate(self.angular)
+            ]
+        )
+
+    def draw(
+        self, x: Array, intensity: float, rng: np.random.Generator, offset: Array | None = None
+    ) -> Array:
+        """h(x_k) + w_k for states ``x`` (K, n_x), w_k ~ N(0, R) from ``rng``; angles wrapped."""
+        L = np.linalg.cholesky(self.R(intensity))
+        eps = rng.standard_normal((x.shape[0], self.n_z))
+        z = self.h(x.T).T + eps @ L.T
+        for i, is_angle in enumerate(self.angular):
+            shifted = z[:, i] if offset is None else z[:, i] + offset[i]
+            z[:, i] = wrap_angle(shifted) if is_angle else shifted
+        return z
