@@ -42,9 +42,13 @@ def main() -> None:
     n_pf = 3 if "tl-pf" in names else len(names)
     steps = a.runs * cfg.K * cfg.particles * n_pf
     out = {
-        "runs": a.runs, "workers": a.workers, "particles": a.particles, "filters": names,
-        "batch_size": a.batch_size or default_batch_size(a.particles, names),
-        "wall_s": round(wall, 2), "particle_steps": steps,
+        "runs": a.runs,
+        "workers": a.workers,
+        "particles": a.particles,
+        "filters": names,
+        "batch_size": a.batch_size or default_batch_size(cfg, names),
+        "wall_s": round(wall, 2),
+        "particle_steps": steps,
         "ns_per_particle_step_per_core": round(wall * a.workers / steps * 1e9, 1),
         "cpu_ns_per_particle_step": round(cpu / steps * 1e9, 1),
         "loadavg_1min": round(os.getloadavg()[0], 2),

@@ -23,7 +23,7 @@ def test_same_seed_same_result_whatever_the_batch_size_or_worker_count():
     for bs, workers in ((1, 1), (3, 2)):
         other = run_experiment(cfg, FILTERS, batch_size=bs, workers=workers, time_steps=False)
         for name in base:
-            np.testing.assert_allclose(base[name].run_mse, other[name].run_mse, rtol=1e-9)
+            np.testing.assert_allclose(base[name].run_rmse, other[name].run_rmse, rtol=1e-9)
             np.testing.assert_allclose(
                 base[name].rmse_per_step, other[name].rmse_per_step, rtol=1e-9
             )
@@ -101,9 +101,9 @@ def test_a_sweep_over_the_primary_intensity_equals_separate_experiments():
         alone = run_experiment(cfg, names, batch_size=4, workers=1, time_steps=False)
         assert res.keys() == alone.keys()
         for name in alone:
-            assert res[name].run_mse == alone[name].run_mse, name
+            assert res[name].run_rmse == alone[name].run_rmse, name
             assert res[name].transfer_rate == alone[name].transfer_rate, name
-    assert swept[0]["pf"].run_mse != swept[2]["pf"].run_mse  # the intensity did change
+    assert swept[0]["pf"].run_rmse != swept[2]["pf"].run_rmse  # the intensity did change
 
 
 def test_a_sweep_refuses_configurations_that_differ_beyond_the_primary():

@@ -11,18 +11,17 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
-from tltrack.filters.base import Estimate
 from tltrack.filters.particle import warm_up
-from tltrack.messages import EpisodeStart, EstimateMsg, Measurement, Transfer
-from tltrack.models.base import Layout
+from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, wire_covariance
+from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, estimate_message
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -169,47 +168,32 @@ class PrimaryTracker:
         return sid in self.alive or sid not in self.seen
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
-        k, t_sensor = z.k, z.t_sensor
         t0 = time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
         used = ep.tracker.used_transfer
-        layout = ep.tracker.layout
-        self._publish(e, "tl", ep.tracker.tl_name, layout, k, t_sensor, tl, used, step_ms)
-        self._publish(e, "isolated", ep.tracker.iso_name, layout, k, t_sensor, iso, False, step_ms)
+        tl_recovered, iso_recovered = ep.tracker.recovered
+        for role, name, est, role_used, recovered in (
+            ("tl", ep.tracker.tl_name, tl, used, tl_recovered),
+            ("isolated", ep.tracker.iso_name, iso, False, iso_recovered),
+        ):
+            message = partial(
+                estimate_message,
+                z,
+                keys.PRIMARY,
+                name,
+                ep.tracker.layout,
+                est,
+                used=role_used,
+                recovered=recovered,
+                step_ms=step_ms,
+            )
+            self.svc.publish(keys.primary_estimate(role, e), message)
+            self.svc.count("recoveries" if recovered else "steps_on_track")
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
         if ep.tracker.rolled_back:
             self.svc.count("rollbacks_to_isolated")
-
-    def _publish(
-        self,
-        e: str,
-        role: str,
-        name: str,
-        layout: Layout,
-        k: int,
-        t_sensor: float,
-        est: Estimate,
-        used: bool,
-        step_ms: float,
-    ) -> None:
-        self.svc.publish(
-            keys.primary_estimate(role, e),
-            lambda: EstimateMsg(
-                episode=e,
-                sender=keys.PRIMARY,
-                k=k,
-                t_sensor=t_sensor,
-                filter=name,
-                x=est.mean[0],
-                pos=layout.position(est.mean[0]),
-                P=wire_covariance(est.cov[0]),
-                transfer_used=used,
-                t_sent=time.time(),
-                step_ms=step_ms,
-            ),
-        )
 
 
 def main(argv: list[str] | None = None) -> None:

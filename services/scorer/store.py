@@ -22,7 +22,7 @@ CREATE TABLE IF NOT EXISTS truth (
     episode TEXT, k INTEGER, x TEXT, t_sensor REAL, pos TEXT, PRIMARY KEY (episode, k));
 CREATE TABLE IF NOT EXISTS estimates (
     episode TEXT, filter TEXT, k INTEGER, x TEXT, P TEXT, transfer_used INTEGER,
-    t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, pos TEXT,
+    t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, pos TEXT, recovered INTEGER,
     PRIMARY KEY (episode, filter, k));
 CREATE TABLE IF NOT EXISTS service_stats (
     operator TEXT, service TEXT, t REAL, stats TEXT, PRIMARY KEY (operator, service));
@@ -36,10 +36,12 @@ class Store:
         self.db.execute("PRAGMA journal_mode=WAL")
         self.db.execute("PRAGMA synchronous=NORMAL")
         self.db.executescript(SCHEMA)
-        for table in ("truth", "estimates"):  # a file from before positions were sent
+        added = [("truth", "pos", "TEXT"), ("estimates", "pos", "TEXT")]
+        added += [("estimates", "recovered", "INTEGER")]
+        for table, column, kind in added:  # a file from before schema 2's fields
             columns = [row[1] for row in self.db.execute(f"PRAGMA table_info({table})")]
-            if "pos" not in columns:
-                self.db.execute(f"ALTER TABLE {table} ADD COLUMN pos TEXT")
+            if column not in columns:
+                self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
         self.db.execute("BEGIN")
 
     def commit(self) -> None:
@@ -70,7 +72,8 @@ class Store:
     def estimate(self, m: EstimateMsg, t_recv: float) -> bool:
         cur = self.db.execute(
             "INSERT OR IGNORE INTO estimates (episode, filter, k, x, P, transfer_used,"
-            " t_sensor, t_sent, t_recv, step_ms, pos) VALUES (?,?,?,?,?,?,?,?,?,?,?)",
+            " t_sensor, t_sent, t_recv, step_ms, pos, recovered)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 m.episode,
                 m.filter,
@@ -83,6 +86,7 @@ class Store:
                 t_recv,
                 m.step_ms,
                 json.dumps(m.pos),
+                int(m.recovered),
             ),
         )
         return cur.rowcount == 1

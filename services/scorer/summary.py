@@ -36,15 +36,17 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
     sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
     latency: dict[str, list[float]] = defaultdict(list)
     used: dict[str, int] = defaultdict(int)
+    recoveries: dict[str, int] = defaultdict(int)
     seen: dict[str, set[tuple[str, int]]] = defaultdict(set)
-    for ep, name, k, pos, tu, t_sensor, t_recv in store.rows(
-        "SELECT episode, filter, k, pos, transfer_used, t_sensor, t_recv FROM estimates"
+    for ep, name, k, pos, tu, rec, t_sensor, t_recv in store.rows(
+        "SELECT episode, filter, k, pos, transfer_used, recovered, t_sensor, t_recv FROM estimates"
     ):
         if ep not in K_of:
             continue
         seen[name].add((ep, k))
         latency[name].append((t_recv - t_sensor) * 1e3)
         used[name] += tu
+        recoveries[name] += rec or 0
         if (ep, k) in truth and pos is not None:
             d = np.array(json.loads(pos)) - truth[ep, k]
             sq[name][k].append(float(d[0] ** 2 + d[1] ** 2))
@@ -59,6 +61,7 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
             "steps": len(seen[name]),
             "gaps": expected - len(seen[name]),
             "steps_with_transfer": used[name],
+            "recoveries": recoveries[name],
             "latency_ms": _percentiles(latency[name]),
         }
     everything = [v for lst in latency.values() for v in lst]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Literal
 
 from pydantic import Field
@@ -12,9 +13,15 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
 from tltrack.filters.particle import warm_up
-from tltrack.messages import EpisodeStart, EstimateMsg, Measurement, Transfer
+from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, SourceEpisode, StepQueue, wire_covariance
+from tltrack.tracking import (
+    Episodes,
+    SourceEpisode,
+    StepQueue,
+    estimate_message,
+    wire_covariance,
+)
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("source_tracker")
@@ -101,23 +108,21 @@ class SourceTracker:
                     P_eta=wire_covariance(eta.cov[0]),
                 ),
             )
-        self.svc.publish(
-            keys.source_estimate(sid, e),
-            lambda: EstimateMsg(
-                episode=e,
-                sender=sid,
-                k=k,
-                t_sensor=t_sensor,
-                filter=ep.tracker.name,
-                x=est.mean[0],
-                pos=ep.tracker.layout.position(est.mean[0]),
-                P=wire_covariance(est.cov[0]),
-                transfer_used=False,
-                t_sent=time.time(),
-                step_ms=step_ms,
-            ),
+        recovered = ep.tracker.recovered
+        message = partial(
+            estimate_message,
+            z,
+            sid,
+            ep.tracker.name,
+            ep.tracker.layout,
+            est,
+            used=False,
+            recovered=recovered,
+            step_ms=step_ms,
         )
+        self.svc.publish(keys.source_estimate(sid, e), message)
         self.svc.count("steps")
+        self.svc.count("recoveries" if recovered else "steps_on_track")
 
 
 def main(argv: list[str] | None = None) -> None:

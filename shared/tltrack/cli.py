@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, get_args
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from tltrack.config import Config, ConfigError, load_config, make_config
+from tltrack.config import Config, ConfigError, FilterKind, load_config, make_config
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -40,6 +40,7 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
     source_intensity = overrides.pop("source_intensity", None)
     sources = overrides.pop("sources", None)
     fault = overrides.pop("source_fault", None)
+    source_filter = overrides.pop("source_filter", None)
     try:
         if sources is not None and source_intensity is not None:
             raise ConfigError("--sources: give either --sources or --source-intensity, not both")
@@ -51,6 +52,13 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
         if fault is not None:
             first = {**cfg.sources[0].model_dump(), "fault": fault}
             cfg = cfg.with_(sources=[first, *cfg.sources[1:]])
+        if source_filter is not None:
+            if source_filter not in get_args(FilterKind):
+                known = ", ".join(get_args(FilterKind))
+                raise ConfigError(f"--source-filter: unknown kind {source_filter!r}; use {known}")
+            cfg = cfg.with_(
+                sources=[{**s.model_dump(), "filter": source_filter} for s in cfg.sources]
+            )
     except ConfigError as err:
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
@@ -85,6 +93,10 @@ def experiment(
     ] = None,
     source_fault: Annotated[
         str | None, typer.Option(help="fault of the (first) source: none, bias, diverged or stale")
+    ] = None,
+    source_filter: Annotated[
+        str | None,
+        typer.Option(help="every source's filter kind (default: its TL primary's kind)"),
     ] = None,
     transfer_budget: Annotated[
         float | None, typer.Option(help="robust-tl-*: at most this share of steps with a transfer")
@@ -122,6 +134,7 @@ def experiment(
         truth_seed=truth_seed,
         sources=sources,
         source_fault=source_fault,
+        source_filter=source_filter,
         transfer_budget=transfer_budget,
         recovery=recovery,
     )

@@ -24,6 +24,8 @@ Scenario = Literal["cv", "ct"]
 Preset = Literal["paper", "arasaratnam-haykin"]
 TruthMode = Literal["fixed", "random", "noise-free"]
 SourceFault = Literal["none", "bias", "diverged", "stale"]
+#: the posterior approximations a filter may use (tltrack.engine.registry builds them)
+FilterKind = Literal["pf", "ukf", "ckf3", "ckf5"]
 
 _DEG = math.pi / 180.0
 
@@ -59,7 +61,10 @@ def preset_values(scenario: str, preset: str) -> dict[str, Any]:
 
 
 class SourceSpec(BaseModel):
-    """One source operator: its id, sensor, and (for robustness studies) an injected fault."""
+    """One source operator: its id, sensor, filter kind, and (for robustness studies) a fault.
+
+    ``filter`` is the kind of the source's own filter; None: the kind of the TL primary it feeds.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -67,6 +72,7 @@ class SourceSpec(BaseModel):
     intensity: float = Field(1.0, gt=0, allow_inf_nan=False)
     position: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
     fault: SourceFault = "none"
+    filter: FilterKind | None = None
 
 
 class Config(BaseModel):

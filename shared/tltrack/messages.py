@@ -32,7 +32,8 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-#: 2: Truth and EstimateMsg carry ``pos``, the position in ``x``: the referee needs no state layout
+#: 2: Truth and EstimateMsg carry ``pos``, the position in ``x`` (the referee needs no state
+#: layout), and EstimateMsg whether the filter was reinitialised (``recovered``)
 SCHEMA_VERSION = 2
 SUPPORTED_VERSIONS = frozenset({2})
 
@@ -228,6 +229,7 @@ class EstimateMsg(Message):
     pos: Vector
     P: Matrix
     transfer_used: bool
+    recovered: bool = False  #: the filter had lost the track and was reinitialised at this step
     t_sent: Timestamp
     step_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)]
 

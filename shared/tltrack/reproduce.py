@@ -167,7 +167,7 @@ def run_all(
         wall = time.perf_counter() - t0
         by_intensity = {c.primary_intensity: r for c, r in zip(cfgs, swept, strict=True)}
         for job in group:
-            wanted = {s.name for s in expand(job.filters)}
+            wanted = {s.name for s in expand(job.filters, job.cfg)}
             res = by_intensity[job.cfg.primary_intensity]
             doc = results.assemble(
                 job.cfg, {n: r for n, r in res.items() if n.split("/")[0] in wanted}

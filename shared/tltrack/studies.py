@@ -43,7 +43,7 @@ def base(runs: int, seed: int = 0) -> Config:
 
 def run_difference(a: FilterResult, b: FilterResult) -> NDArray[np.float64]:
     """Per run, the overall RMSE of a minus that of b: the paired comparison's samples."""
-    return np.sqrt(a.run_mse) - np.sqrt(b.run_mse)
+    return np.asarray(a.run_rmse) - np.asarray(b.run_rmse)
 
 
 def paired(a: FilterResult, b: FilterResult) -> str:

@@ -10,6 +10,7 @@ random stream. So a lock-step replay of run r computes, to rounding, exactly wha
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Callable
 from typing import Generic, Protocol, TypeVar
 
@@ -25,11 +26,13 @@ from tltrack.filters.transfer import Primary, Source
 from tltrack.messages import (
     EpisodeEnd,
     EpisodeStart,
+    EstimateMsg,
     Measurement,
     Message,
     RejectCounter,
     Transfer,
 )
+from tltrack.models.base import Layout
 from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
 from tltrack.transport import Received, decode_received
@@ -67,6 +70,34 @@ def wire_covariance(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + P.T)
 
 
+def estimate_message(
+    z: Measurement,
+    sender: str,
+    name: str,
+    layout: Layout,
+    est: Estimate,
+    *,
+    used: bool,
+    recovered: bool,
+    step_ms: float,
+) -> EstimateMsg:
+    """What a tracker publishes for filter ``name``'s estimate at the step of ``z``."""
+    return EstimateMsg(
+        episode=z.episode,
+        sender=sender,
+        k=z.k,
+        t_sensor=z.t_sensor,
+        filter=name,
+        x=est.mean[0],
+        pos=layout.position(est.mean[0]),
+        P=wire_covariance(est.cov[0]),
+        transfer_used=used,
+        recovered=recovered,
+        t_sent=time.time(),
+        step_ms=step_ms,
+    )
+
+
 class SourceEpisode:
     """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1)."""
 
@@ -82,6 +113,11 @@ class SourceEpisode:
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
         return self.role.step(None if z is None else measurement(self.cfg, z, self.source_id))
+
+    @property
+    def recovered(self) -> bool:
+        """Did the last step reinitialise the filter (it had lost the track)?"""
+        return _any(self.role.recovered)
 
 
 class PrimaryEpisode:
@@ -129,9 +165,19 @@ class PrimaryEpisode:
         return self.tl.used is not None and bool(self.tl.used.any())
 
     @property
+    def recovered(self) -> tuple[bool, bool]:
+        """Did the last step reinitialise (TL filter, isolated filter)?"""
+        twin = self.tl.twin if self.tl.twin is not None else self.iso
+        return _any(self.tl.recovered), _any(twin.recovered)
+
+    @property
     def rolled_back(self) -> bool:
         """Did the last step roll the robust primary back to its isolated twin?"""
         return self.tl.rolled_back is not None and bool(self.tl.rolled_back.any())
+
+
+def _any(runs: np.ndarray | None) -> bool:
+    return runs is not None and bool(runs.any())
 
 
 class StepQueue(Generic[T]):

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from tltrack.config import Config
 from tltrack.engine.faults import transfer_lag
-from tltrack.engine.registry import FilterSpec, build, parse, recovery
+from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_name
 from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy
@@ -64,13 +64,29 @@ class FilterStats:
         self.tracks += other.tracks
 
 
-def expand(names: Sequence[str]) -> list[FilterSpec]:
-    """The requested filters plus the source each TL filter needs, sources first."""
-    specs = [parse(n) for n in dict.fromkeys(names)]
-    sources = [parse(s.source_name) for s in specs if s.role in ("tl", "robust")]
-    sources += [s for s in specs if s.role == "source"]
-    others = [s for s in specs if s.role != "source"]
-    return list({s.name: s for s in [*sources, *others]}.values())
+def expand(names: Sequence[str], cfg: Config) -> list[FilterSpec]:
+    """The requested filters plus the sources each TL filter needs, sources first."""
+    return list(
+        dict.fromkeys([*(parse(n) for n, _ in source_filters(names, cfg)), *_primaries(names)])
+    )
+
+
+def _primaries(names: Sequence[str]) -> list[FilterSpec]:
+    return [s for s in (parse(n) for n in dict.fromkeys(names)) if s.role != "source"]
+
+
+def source_filters(names: Sequence[str], cfg: Config) -> list[tuple[str, str]]:
+    """(source filter, source id) of every source filter to run: those the TL filters listen to,
+    and those asked for by name (for every source)."""
+    ids = [s.id for s in cfg.sources]
+    pairs = []
+    for spec in (parse(n) for n in dict.fromkeys(names)):
+        if spec.role in ("tl", "robust"):
+            pairs += [(source_name(spec, cfg, sid), sid) for sid in ids]
+    pairs += [
+        (spec.name, sid) for spec in map(parse, names) if spec.role == "source" for sid in ids
+    ]
+    return list(dict.fromkeys(pairs))
 
 
 def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
@@ -172,17 +188,16 @@ def run_sweep_batch(
         s, R = meas[sensor_id]
         return Observation.broadcast(s, z_src[sensor_id][k - 1], R)
 
-    specs = expand(names)
+    specs = _primaries(names)
     sources: dict[tuple[str, str], Source] = {}
     source_scores: dict[str, _Score] = {}
-    for spec in specs:
-        if spec.role == "source":
-            for sid in source_ids:
-                filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
-                sources[spec.name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
-                source_scores[reported_name(spec, sid, len(source_ids))] = _Score(
-                    K, model.layout, keep_tracks
-                )
+    for name, sid in source_filters(names, cfg):
+        spec = parse(name)
+        filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
+        sources[name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
+        source_scores[reported_name(spec, sid, len(source_ids))] = _Score(
+            K, model.layout, keep_tracks
+        )
     variants = [
         _PrimaryVariant(c, [s.z[PRIMARY] for s in sim], specs, model, x0_hat, runs, keep_tracks)
         for c, sim in zip(cfgs, sims, strict=True)
@@ -206,7 +221,7 @@ def run_sweep_batch(
                 return [
                     t
                     for sid in source_ids
-                    if (t := made[spec.source_name, sid].get(k - lag[sid])) is not None
+                    if (t := made[source_name(spec, cfg, sid), sid].get(k - lag[sid])) is not None
                 ]
             if spec.role == "fusion":
                 return [observation(sid, k) for sid in source_ids]
@@ -240,8 +255,6 @@ class _PrimaryVariant:
         self.primaries: dict[str, tuple[FilterSpec, Primary]] = {}
         self.scores: dict[str, _Score] = {}
         for spec in specs:
-            if spec.role == "source":
-                continue
             policy = (
                 TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
                 if spec.role == "robust"
@@ -301,7 +314,7 @@ class FilterResult:
     nees: float
     ms_per_step: float | None
     transfer_rate: float  # share of run-steps whose update used a transfer
-    run_mse: list[float]  # per run, for paired Monte-Carlo errors
+    run_rmse: list[float]  # per run, sqrt(mean over k of its squared error): paired MC errors
 
     @classmethod
     def from_stats(cls, s: FilterStats, runs: int, lost_threshold: float) -> FilterResult:
@@ -314,19 +327,19 @@ class FilterResult:
             nees=float(s.nees.sum() / (runs * s.K)),
             ms_per_step=float(np.median(s.step_ms)) if s.step_ms else None,
             transfer_rate=s.transfer_steps / (runs * s.K),
-            run_mse=np.concatenate(s.run_mse).tolist(),
+            run_rmse=np.sqrt(np.concatenate(s.run_mse)).tolist(),
         )
 
 
-def default_batch_size(n_particles: int, names: Sequence[str]) -> int:
+def default_batch_size(cfg: Config, names: Sequence[str]) -> int:
     """Runs per batch: enough to amortise Python overhead, few enough to stay far under 2 GiB.
 
     A sweep keeps the batch of one configuration: its memory grows with the number of
     configurations (8 I_p of reproduce: ~0.1 GB a worker), while a batch cut to fit would leave
     the sigma-point filters stepping 3 runs at a time (measured 2.4x slower).
     """
-    pf_count = sum(1 for s in expand(names) if s.kind == "pf") or 1
-    return int(np.clip(400_000 // (n_particles * pf_count), 1, 64))
+    pf_count = sum(1 for s in expand(names, cfg) if s.kind == "pf") or 1
+    return int(np.clip(400_000 // (cfg.particles * pf_count), 1, 64))
 
 
 def run_experiment(
@@ -362,7 +375,7 @@ def run_sweep(
     intensity), running the sources once for all of them; see :func:`run_sweep_batch`."""
     check_sweep(cfgs)
     cfg = cfgs[0]
-    bs = batch_size or default_batch_size(cfg.particles, names)
+    bs = batch_size or default_batch_size(cfg, names)
     batches = [list(range(i, min(i + bs, cfg.runs))) for i in range(0, cfg.runs, bs)]
     workers = max(1, min(workers or os.cpu_count() or 1, len(batches)))
     totals: list[dict[str, FilterStats]] = [{} for _ in cfgs]

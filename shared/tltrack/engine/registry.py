@@ -5,7 +5,8 @@ A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, ``uk
 
 - no prefix: the isolated primary, its own measurement only;
 - ``tl-``: the primary with every source's transfer (Algorithm 2 / the stacked TL-KF update);
-- ``source-``: a source operator's filter (Algorithm 1), of the same kind as its TL primary;
+- ``source-``: a source operator's filter (Algorithm 1); by default of the same kind as its TL
+  primary, or of the kind its config names (``sources[].filter``, ``--source-filter``);
 - ``fusion-``: centralized fusion, the primary given every source's *raw* measurement too. It is
   the bound that transfer trades away for privacy;
 - ``robust-tl-``: TL that first decides which transfers to use (a consistency gate, and the
@@ -16,12 +17,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import Config
+from tltrack.config import Config, FilterKind
 from tltrack.engine.streams import streams
 from tltrack.filters.base import Filter
 from tltrack.filters.particle import ParticleFilter
@@ -29,9 +30,9 @@ from tltrack.filters.recovery import Recovery
 from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, unscented
 from tltrack.models.base import MotionModel
 
-Kind = Literal["pf", "ukf", "ckf3", "ckf5"]
+Kind = FilterKind
 Role = Literal["isolated", "tl", "robust", "source", "fusion"]
-KINDS: tuple[Kind, ...] = ("pf", "ukf", "ckf3", "ckf5")
+KINDS: tuple[Kind, ...] = get_args(FilterKind)
 _PREFIX: dict[str, Role] = {"tl": "tl", "source": "source", "fusion": "fusion"}
 
 
@@ -41,10 +42,11 @@ class FilterSpec:
     kind: Kind
     role: Role
 
-    @property
-    def source_name(self) -> str:
-        """The source filter a TL primary of this kind listens to."""
-        return f"source-{self.kind}"
+
+def source_name(spec: FilterSpec, cfg: Config, source_id: str) -> str:
+    """The filter of source ``source_id`` that a TL primary of ``spec``'s kind listens to."""
+    kind = next((s.filter for s in cfg.sources if s.id == source_id), None) or spec.kind
+    return f"source-{kind}"
 
 
 def parse(name: str) -> FilterSpec:

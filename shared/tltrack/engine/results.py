@@ -60,16 +60,10 @@ def position_bounds(cfg: Config) -> dict[str, list[float]]:
     }
 
 
-def assemble(
-    cfg: Config, results: dict[str, FilterResult], *, include_runs: bool = False
-) -> dict[str, Any]:
-    """The results document; per-run MSEs only on request (they grow with the run count)."""
-    filters = {}
-    for name, r in results.items():
-        d = asdict(r)
-        if not include_runs:
-            d.pop("run_mse")
-        filters[name] = d
+def assemble(cfg: Config, results: dict[str, FilterResult]) -> dict[str, Any]:
+    """The results document. Each filter's ``run_rmse`` lists every run's overall RMSE, in run
+    order, so that anyone can compute paired differences between filters from it."""
+    filters = {name: asdict(r) for name, r in results.items()}
     return {
         "schema_version": SCHEMA_VERSION,
         "provenance": provenance(),

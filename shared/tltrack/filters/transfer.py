@@ -25,8 +25,9 @@ from tltrack.filters.decision import TransferPolicy
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
 
-#: Reinitialises the lost runs of a filter around a measurement (see tltrack.filters.recovery).
-Recover = Callable[[Any, Observation], Any]
+#: Reinitialises the lost runs of a filter around a measurement; returns which runs it did (see
+#: tltrack.filters.recovery).
+Recover = Callable[[Any, Observation], NDArray[np.bool_]]
 
 
 class Source:
@@ -39,14 +40,16 @@ class Source:
         self.sensor = sensor
         self.R = R
         self.recover = recover
+        self.recovered: NDArray[np.bool_] | None = None  #: per run, by the last step
         self._predicted = False
 
     def step(self, z: Observation | None) -> tuple[Estimate, Observation]:
         if not self._predicted:
             self.filter.predict()
+        self.recovered = None
         if z is not None:
             if self.recover is not None:
-                self.recover(self.filter, z)
+                self.recovered = self.recover(self.filter, z)
             self.filter.update([z])
         est = self.filter.estimate()
         self.filter.predict()
@@ -78,14 +81,16 @@ class Primary:
         self.twin = twin
         self.used: NDArray[np.bool_] | None = None
         self.rolled_back: NDArray[np.bool_] | None = None  #: per run, by the last step
+        self.recovered: NDArray[np.bool_] | None = None  #: per run, by the last step
         self.twin_estimate: Estimate | None = None
 
     def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
         if self.twin is not None:
             self.twin_estimate = self.twin.step(z)
         self.filter.predict()
+        self.recovered = None
         if self.recover is not None and z is not None:
-            self.recover(self.filter, z)
+            self.recovered = self.recover(self.filter, z)
         if self.policy is not None and transfers:
             transfers = self.policy.select(z, transfers)
         self.used = _any_applied(transfers)
