@@ -16,6 +16,8 @@ from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.gaussian_sensor import GaussianSensor
 
 CV_LAYOUT = ConstantVelocity.layout
+#: the paper's radar at the origin, as a transfer describes it
+RADAR = {"kind": "range-bearing", "position": (0.0, 0.0), "sigma_r": 10.0, "sigma_bearing": 3e-3}
 
 
 @dataclass(frozen=True)

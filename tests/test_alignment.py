@@ -35,6 +35,7 @@ def _replay(shift: int) -> np.ndarray:
             k=k,
             t_sensor=0.0,
             k_apply=k + 1,
+            sensor=src.sensor_spec,
             eta=eta.mean[:, 0],
             P_eta=eta.cov[0],
         )
@@ -78,6 +79,7 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
                 k=k,
                 t_sensor=0.0,
                 k_apply=k + 1,
+                sensor=src.sensor_spec,
                 eta=eta.mean[:, 0],
                 P_eta=eta.cov[0],
             )

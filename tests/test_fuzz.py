@@ -25,6 +25,7 @@ import msgpack
 import numpy as np
 import pytest
 import zenoh
+from doubles import RADAR
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from livestack import SIM_DEFAULTS, estimates, logs, stack
@@ -83,7 +84,9 @@ def _template(kind: str) -> Message:
     if kind == "measurement":
         return Measurement(**common, sender="sensor_sim", sensor="primary", z=[1500.0, 0.7])
     if kind == "transfer":
-        return Transfer(**common, sender="s1", k_apply=6, eta=[1500.0, 0.7], P_eta=SPD2)
+        return Transfer(
+            **common, sender="s1", k_apply=6, sensor=RADAR, eta=[1500.0, 0.7], P_eta=SPD2
+        )
     if kind == "truth":
         return Truth(**common, sender="sensor_sim", x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0])
     return EstimateMsg(

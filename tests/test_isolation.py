@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 import zenoh
+from doubles import RADAR
 from livestack import SIM_DEFAULTS, estimates, logs, stack
 from security_helpers import (
     IDENTITY,
@@ -119,6 +120,7 @@ def test_each_operator_reads_only_what_the_acl_grants(tmp_path: Path) -> None:
                     k=k,
                     t_sensor=0.0,
                     k_apply=k + 1,
+                    sensor=RADAR,
                     eta=[1.0, 0.0],
                     P_eta=[[1.0, 0.0], [0.0, 1.0]],
                 )

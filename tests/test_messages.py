@@ -10,6 +10,7 @@ from typing import Any
 import msgpack
 import numpy as np
 import pytest
+from doubles import RADAR
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from tltrack.config import make_config
@@ -50,7 +51,9 @@ def samples() -> list[Message]:
         Measurement(**COMMON, k=3, sensor="radar-1", z=np.array([1500.0, 0.7])),
         Truth(**COMMON, k=3, x=np.array([1.0, 2.0, 3.0, 4.0, -0.05]), pos=np.array([1.0, 3.0])),
         Truth(**COMMON, k=0, x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0]),
-        Transfer(**COMMON, k=3, k_apply=4, eta=np.array([1500.0, 0.7]), P_eta=_spd(2)),
+        Transfer(
+            **COMMON, k=3, k_apply=4, sensor=RADAR, eta=np.array([1500.0, 0.7]), P_eta=_spd(2)
+        ),
         EstimateMsg(
             **COMMON,
             k=7,
@@ -95,7 +98,7 @@ def reject(payload: bytes, typ: type[Message]) -> str:
 
 
 VALID_TRANSFER = Transfer(
-    **COMMON, k=3, k_apply=4, eta=[1500.0, 0.7], P_eta=[[4.0, 1.0], [1.0, 3.0]]
+    **COMMON, k=3, k_apply=4, sensor=RADAR, eta=[1500.0, 0.7], P_eta=[[4.0, 1.0], [1.0, 3.0]]
 )
 
 
@@ -230,16 +233,32 @@ def test_transfer_bad_shapes(field: str, value: Any) -> None:
     assert reject(pack(d), Transfer) == "bad_shape"
 
 
+def test_a_transfer_describes_its_sensor_and_its_size_follows_the_kind() -> None:
+    bearing = {"kind": "bearing", "position": [-3000.0, 5.0], "sigma_bearing": 1e-3}
+    d = {**raw(VALID_TRANSFER), "sensor": bearing, "eta": [0.7], "P_eta": [[1e-6]]}
+    back = decode(pack(d), Transfer)
+    assert back.sensor.kind == "bearing" and back.sensor.position == (-3000.0, 5.0)
+    d["eta"] = [1500.0, 0.7]  # two components from a bearing-only sensor
+    assert reject(pack(d), Transfer) == "bad_shape"
+    d = {**raw(VALID_TRANSFER), "sensor": {**bearing, "kind": "sonar"}}
+    assert reject(pack(d), Transfer) == "invalid"
+    d = {**raw(VALID_TRANSFER), "sensor": {**bearing, "sigma_pos": 3.0}}  # not a bearing's
+    assert reject(pack(d), Transfer) == "invalid"
+    d = raw(VALID_TRANSFER)
+    del d["sensor"]
+    assert reject(pack(d), Transfer) == "invalid"
+
+
 def test_estimate_bad_shapes() -> None:
     est = samples()[4]
     d = raw(est)
     d["P"] = _spd(4).tolist()  # x has 5 entries
     assert reject(pack(d), EstimateMsg) == "bad_shape"
     d = raw(est)
-    d["x"] = [0.0] * 6
+    d["x"] = [0.0] * 7  # no scenario has 7 states
     assert reject(pack(d), EstimateMsg) == "bad_shape"
     d = raw(samples()[0])
-    d["z"] = [1.0, 2.0, 3.0]
+    d["z"] = [1.0, 2.0, 3.0, 4.0]  # no sensor measures 4 components
     assert reject(pack(d), Measurement) == "bad_shape"
     d = raw(samples()[1])
     d["x"] = [1.0, 2.0, 3.0]

@@ -100,6 +100,7 @@ GARBAGE = [
             "k": 1,
             "t_sensor": 0.0,
             "k_apply": 2,
+            "sensor": {"kind": "range-bearing", "position": [0.0, 0.0]},
             "eta": [1.0, float("nan")],
             "P_eta": [[1.0, 0.0], [0.0, 1.0]],
         }

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from doubles import RADAR
 from security_helpers import make_certs
 from tltrack import keys
 from tltrack.messages import Measurement, RejectCounter, Transfer, decode, encode
@@ -357,6 +358,7 @@ def test_subscriber_counts_rejects_and_skips_them(router: str) -> None:
         k=0,
         k_apply=1,
         t_sensor=T0,
+        sensor=RADAR,
         eta=[1.0, 2.0],
         P_eta=[[1.0, 0.0], [0.0, 1.0]],
     )
@@ -630,6 +632,7 @@ def test_decode_of_a_received_sample_is_the_only_entry(router: str) -> None:
         k=4,
         k_apply=5,
         t_sensor=T0,
+        sensor=RADAR,
         eta=[10.0, 0.2],
         P_eta=[[2.0, 0.1], [0.1, 1.0]],
     )

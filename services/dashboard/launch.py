@@ -14,13 +14,10 @@ from typing import Protocol
 
 from tltrack.services.dashboard.settings import DEFAULT_HOST, DEFAULT_PORT, NAME
 
+#: the dashboard's liveliness token, as sensor_sim's ``wait_for`` names it
+TOKEN = f"referee:{NAME}"
 #: sensor_sim's default ``wait_for`` plus the dashboard
-SIM_WAIT_FOR = [
-    "source/s1:source_tracker",
-    "primary:primary_tracker",
-    "referee:scorer",
-    f"referee:{NAME}",
-]
+SIM_WAIT_FOR = ["source/s1:source_tracker", "primary:primary_tracker", "referee:scorer", TOKEN]
 
 
 class _Stack(Protocol):

@@ -18,6 +18,7 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import Config
+from tltrack.filters.decision import NotComparableError
 from tltrack.filters.particle import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
@@ -58,6 +59,10 @@ class Episode:
     transfers: dict[int, dict[str, Transfer]] = field(default_factory=dict)
     ready_since: float | None = None  # when z_{next_k} was first ready (monotonic)
 
+    @property
+    def n_z(self) -> int:
+        return self.tracker.n_z
+
 
 class PrimaryTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
@@ -94,28 +99,21 @@ class PrimaryTracker:
         else:
             self.alive.discard(sid)
 
-    def _open(self, start: EpisodeStart, cfg: Config) -> Episode:
-        log.info(
-            "episode %s (run %d): tl-%s and %s",
-            start.episode,
-            start.run,
-            self.s.filter,
-            self.s.filter,
-        )
-        return Episode(
-            start,
-            PrimaryEpisode(cfg, start.run, self.s.filter, self.s.robust),
-            [s.id for s in cfg.sources],
-        )
+    def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
+        try:
+            tracker = PrimaryEpisode(cfg, start.run, self.s.filter, self.s.robust)
+        except NotComparableError as err:
+            log.error("episode %s refused: %s", start.episode, err)
+            self.svc.count("episodes_refused")
+            return None
+        log.info("episode %s (run %d): %s and %s", start.episode, start.run, *tracker.names)
+        return Episode(start, tracker, [s.id for s in cfg.sources])
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
         ep = self.episodes.get(e)
         if ep is None:
             if not self.episodes.hold(e, lambda: self._on_transfer(e, sid, key, t)):
                 self.svc.rejects.add(key, "unknown_episode")
-            return
-        if sid not in ep.sources:
-            self.svc.rejects.add(key, "unexpected_transfer")
             return
         if t.k_apply < ep.steps.next_k:
             self.svc.rejects.add(key, "late_transfer")

@@ -22,7 +22,7 @@ from tltrack import keys
 from tltrack.config import Config, ConfigError, load_config, make_config
 from tltrack.engine.scenario import simulate
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
-from tltrack.models.from_config import PRIMARY, motion_model
+from tltrack.models.from_config import PRIMARY, motion_model, sensor
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.services.sensor_sim import replay
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
@@ -83,9 +83,8 @@ class Simulator:
         self.s, self.cfg, self.svc = settings, cfg, svc
         self.layout = motion_model(cfg).layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)]
-        self.recorded = (
-            replay.load(settings.replay_csv, self.sensors) if settings.replay_csv else None
-        )
+        models = {sid: sensor(cfg, sid) for sid in self.sensors}
+        self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
         if self.recorded is not None:
             self.cfg = cfg.with_(K=len(self.recorded[PRIMARY]))
 

@@ -50,6 +50,10 @@ class Episode:
     tracker: SourceEpisode
     steps: StepQueue[Measurement] = field(default_factory=StepQueue)
 
+    @property
+    def n_z(self) -> int:
+        return self.tracker.n_z
+
 
 class SourceTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
@@ -104,6 +108,7 @@ class SourceTracker:
                     k=k,
                     t_sensor=t_sensor,
                     k_apply=k + 1,
+                    sensor=ep.tracker.sensor_spec,
                     eta=eta.mean[:, 0],
                     P_eta=wire_covariance(eta.cov[0]),
                 ),

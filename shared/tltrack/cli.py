@@ -118,6 +118,7 @@ def experiment(
     batch_size: Annotated[int | None, typer.Option(help="runs per vectorised batch")] = None,
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
+    from tltrack.engine.montecarlo import check_filters
     from tltrack.engine.registry import parse
     from tltrack.experiment import run_and_save
 
@@ -142,6 +143,7 @@ def experiment(
     try:
         for n in names:
             parse(n)
+        check_filters(cfg, names)
     except ValueError as err:
         console.print(f"[red]error:[/red] --filters: {err}")
         raise typer.Exit(2) from None
@@ -250,14 +252,19 @@ def router(
     "# then open http://127.0.0.1:8050/ ; Ctrl-C stops everything"
 )
 def demo(
-    steps: Annotated[int, typer.Option(help="steps K of the episode")] = 100,
-    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
+    config: Annotated[
+        Path | None, typer.Option(help="TOML or JSON config: every source gets a tracker")
+    ] = None,
+    steps: Annotated[int | None, typer.Option(help="steps K of the episode [100]")] = None,
+    particles: Annotated[int | None, typer.Option(help="particles per PF [6000]")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the summary here")] = None,
     pace: Annotated[float, typer.Option(help="steps per second")] = 20.0,
     realtime: Annotated[bool, typer.Option(help="pace at one step per Ts")] = False,
-    preset: Annotated[str, typer.Option(help="paper or arasaratnam-haykin")] = "arasaratnam-haykin",
-    truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "fixed",
-    seed: Annotated[int, typer.Option(help="master seed")] = 0,
+    preset: Annotated[
+        str | None, typer.Option(help="paper or arasaratnam-haykin [arasaratnam-haykin]")
+    ] = None,
+    truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free [fixed]")] = None,
+    seed: Annotated[int | None, typer.Option(help="master seed [0]")] = None,
     out: Annotated[Path, typer.Option(help="logs and the scorer's database")] = Path("out/demo"),
     serve: Annotated[
         bool, typer.Option(help="also run the live dashboard; keep everything up until Ctrl-C")
@@ -265,23 +272,29 @@ def demo(
     port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
     host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
 ) -> None:
-    """Start the router and the four services on loopback, run one episode, print the summary.
+    """Start the router, the scorer, the trackers and sensor_sim on loopback, run one episode,
+    print the summary.
 
-    The router enforces the package's access control; every service runs as its operator. Any
-    stop signal (or the death of this process) stops every process it started.
+    Without --config the episode is the arasaratnam-haykin preset with a fixed truth, K = 100,
+    N = 6000 (the values in brackets); with it, the file's values, unless an option overrides
+    them. The router enforces the package's access control; every service runs as its
+    operator. Any stop signal (or the death of this process) stops every process it started.
     """
     from tltrack import demo as d
 
+    if config is None:
+        preset, truth = preset or "arasaratnam-haykin", truth or "fixed"
+        steps, particles, seed = steps or 100, particles or 6000, seed or 0
+    cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
     try:
-        d.check_access()
+        d.check_access(cfg)
     except d.AccessControlMissingError as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
+    flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:
         with d.stop_on_signals():
-            summary = _run_demo(
-                d, steps, particles, pace, realtime, preset, truth, seed, out, serve, port, host
-            )
+            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host)
     except d.Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
@@ -293,13 +306,10 @@ def demo(
 
 def _run_demo(
     d: Any,
-    steps: int,
-    particles: int,
+    cfg: Config,
+    sim_flags: list[str],
     pace: float,
     realtime: bool,
-    preset: str,
-    truth: str,
-    seed: int,
     out: Path,
     serve: bool,
     port: int,
@@ -318,9 +328,7 @@ def _run_demo(
     with d.Stack(endpoint, out / "logs", secure=True) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
-        stack.start_service("primary_tracker")
-        stack.start_service("source_tracker")
-        sim_env: dict[str, str] | None = None
+        wait_for = stack.start_trackers(cfg)
         page = ""
         if serve:
             from tltrack.services.dashboard import launch
@@ -332,18 +340,16 @@ def _run_demo(
                     f"taken?); see {out / 'logs' / 'dashboard.log'}"
                 )
                 raise typer.Exit(1)
-            sim_env = launch.sim_env()  # sensor_sim also waits for the dashboard: no step missed
+            wait_for.append(launch.TOKEN)  # sensor_sim also waits for the page: no step missed
             console.print(f"dashboard: [bold]{page}[/bold]  (Prometheus metrics: {page}metrics)")
-        stack.start_service(
-            "sensor_sim",
-            *d.sim_flags(steps, particles, pace, realtime, preset, truth, seed),
-            env=sim_env,
-        )
-        budget = steps * (1.0 if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
-        with progress_bar(steps, "episode") as bar:
+        sim_env = {"TLTRACK_SIM_WAIT_FOR": json.dumps(wait_for)}
+        stack.start_service("sensor_sim", *sim_flags, env=sim_env)
+        K = cfg.K
+        budget = K * (cfg.Ts if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
+        with progress_bar(K, "episode") as bar:
             task = bar.add_task("episode", total=None)
             rc = stack.wait("sensor_sim", budget)
-            bar.update(task, completed=steps, total=steps)
+            bar.update(task, completed=K, total=K)
         if rc != 0:
             console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)

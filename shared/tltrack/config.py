@@ -16,20 +16,35 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, model_validator
 
-Scenario = Literal["cv", "ct"]
+Scenario = Literal["cv", "ct", "ca"]
 Preset = Literal["paper", "arasaratnam-haykin"]
 TruthMode = Literal["fixed", "random", "noise-free"]
 SourceFault = Literal["none", "bias", "diverged", "stale"]
 #: the posterior approximations a filter may use (tltrack.engine.registry builds them)
 FilterKind = Literal["pf", "ukf", "ckf3", "ckf5"]
+#: the kinds of sensor an operator may have (tltrack.models.from_config builds them)
+SensorKind = Literal["range-bearing", "bearing", "position", "range-bearing-doppler"]
+#: each kind's noise parameters and their defaults (None: the config's flat field of that name)
+SENSOR_PARAMETERS: dict[str, dict[str, float | None]] = {
+    "range-bearing": {"sigma_r": None, "sigma_bearing": None},
+    "bearing": {"sigma_bearing": None},
+    "position": {"sigma_pos": 10.0},
+    "range-bearing-doppler": {"sigma_r": None, "sigma_bearing": None, "sigma_rr": 1.0},
+}
+#: measurement components per sensor kind
+SENSOR_NZ = {"range-bearing": 2, "bearing": 1, "position": 2, "range-bearing-doppler": 3}
 
 _DEG = math.pi / 180.0
 
-#: Scenario 1 (constant velocity) and Scenario 2 (coordinated turn), as printed in the seed.
+#: Scenario 1 (constant velocity) and Scenario 2 (coordinated turn), as printed in the seed, and a
+#: constant-acceleration scenario of ours: x = [x, vx, ax, y, vy, ay], starting where Scenario 2
+#: does with a 3 m/s^2 lateral acceleration; q1 is the variance of the acceleration's increment
+#: per step (m^2/s^4, a discrete Wiener-process acceleration), so the acceleration wanders by
+#: about 0.3 m/s^2 per step.
 SCENARIO_DEFAULTS: dict[str, dict[str, Any]] = {
     "cv": {
         "x0": [100.0, 10.0, 100.0, 10.0],
@@ -43,21 +58,60 @@ SCENARIO_DEFAULTS: dict[str, dict[str, Any]] = {
         "q1": 0.1,
         "q2": 1.75e-2,
     },
+    "ca": {
+        "x0": [1000.0, 300.0, 0.0, 1000.0, 0.0, 3.0],
+        "P0_diag": [100.0, 10.0, 1.0, 100.0, 10.0, 1.0],
+        "q1": 0.1,
+        "q2": 0.0,
+    },
 }
 
-#: Differences of each preset from the seed's values, per scenario.
+#: the state dimension of each scenario's motion model
+STATE_DIM = {"cv": 4, "ct": 5, "ca": 6}
+
+#: Differences of each preset from the seed's values, per scenario (none where it names none).
 PRESET_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
-    "paper": {"cv": {}, "ct": {}},
-    "arasaratnam-haykin": {
-        "cv": {},
-        "ct": {"q2": 1.75e-4, "P0_diag": [100.0, 10.0, 100.0, 10.0, 1e-4]},
-    },
+    "paper": {},
+    "arasaratnam-haykin": {"ct": {"q2": 1.75e-4, "P0_diag": [100.0, 10.0, 100.0, 10.0, 1e-4]}},
 }
 
 
 def preset_values(scenario: str, preset: str) -> dict[str, Any]:
     """The scenario's seed values with the preset's differences applied."""
-    return {**SCENARIO_DEFAULTS[scenario], **PRESET_OVERRIDES[preset][scenario]}
+    return {**SCENARIO_DEFAULTS[scenario], **PRESET_OVERRIDES[preset].get(scenario, {})}
+
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Point = tuple[FiniteFloat, FiniteFloat]
+
+
+class SensorSpec(BaseModel):
+    """One operator's sensor: its kind, where it sits, and the noise parameters of that kind.
+
+    A parameter left out takes its default (:data:`SENSOR_PARAMETERS`); one that the kind does not
+    have is refused. The operator's intensity I_w scales the resulting noise covariance.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    kind: SensorKind = "range-bearing"
+    position: Point | None = None
+    sigma_r: Positive | None = None
+    sigma_bearing: Positive | None = None
+    sigma_pos: Positive | None = None
+    sigma_rr: Positive | None = None
+
+    @model_validator(mode="after")
+    def _parameters_of_its_kind(self) -> SensorSpec:
+        own = SENSOR_PARAMETERS[self.kind]
+        for name in ("sigma_r", "sigma_bearing", "sigma_pos", "sigma_rr"):
+            if getattr(self, name) is not None and name not in own:
+                raise ValueError(f"{name} is not a parameter of a {self.kind} sensor")
+        return self
+
+    @property
+    def n_z(self) -> int:
+        return SENSOR_NZ[self.kind]
 
 
 class SourceSpec(BaseModel):
@@ -70,9 +124,16 @@ class SourceSpec(BaseModel):
 
     id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$")
     intensity: float = Field(1.0, gt=0, allow_inf_nan=False)
-    position: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
+    position: Point | None = Field(None, description="the sensor's position; default (0, 0)")
     fault: SourceFault = "none"
     filter: FilterKind | None = None
+    sensor: SensorSpec | None = Field(None, description="default: the paper's range-bearing")
+
+    @model_validator(mode="after")
+    def _one_position(self) -> SourceSpec:
+        if self.position is not None and self.sensor is not None and self.sensor.position:
+            raise ValueError(f"source {self.id}: give either position or sensor.position, not both")
+        return self
 
 
 class Config(BaseModel):
@@ -93,7 +154,8 @@ class Config(BaseModel):
         math.sqrt(10.0) * 1e-3, gt=0, allow_inf_nan=False, description="bearing std [rad]"
     )
     primary_intensity: float = Field(4.0, gt=0, allow_inf_nan=False)
-    primary_position: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
+    primary_position: Point | None = Field(None, description="the sensor's position; (0, 0)")
+    primary_sensor: SensorSpec | None = Field(None, description="default: the paper's radar")
     sources: list[SourceSpec] = Field(
         default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
     )
@@ -125,7 +187,7 @@ class Config(BaseModel):
 
     @model_validator(mode="after")
     def _check_dimensions(self) -> Config:
-        n = 4 if self.scenario == "cv" else 5
+        n = STATE_DIM[self.scenario]
         for name in ("x0", "P0_diag"):
             values = getattr(self, name)
             if len(values) != n:
@@ -137,6 +199,9 @@ class Config(BaseModel):
         ids = [s.id for s in self.sources]
         if len(set(ids)) != len(ids):
             raise ValueError(f"sources: duplicate id in {ids}")
+        sensor = self.primary_sensor
+        if self.primary_position is not None and sensor is not None and sensor.position:
+            raise ValueError("give either primary_position or primary_sensor.position, not both")
         return self
 
     @property

@@ -31,6 +31,7 @@ from typing import IO, Any
 import zenoh
 
 from tltrack import keys
+from tltrack.config import Config
 from tltrack.transport import ZenohSettings, open_session, query
 
 SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
@@ -60,14 +61,23 @@ class AccessControlMissingError(RuntimeError):
     """The package's ACL or password file is gone: the demo refuses to run an open router."""
 
 
-def check_access(access: Path = ACCESS_DIR) -> None:
-    """Raise :class:`AccessControlMissingError` unless the ACL and password file are readable."""
+def check_access(cfg: Config | None = None, access: Path = ACCESS_DIR) -> None:
+    """Raise :class:`AccessControlMissingError` unless the ACL and password file are readable
+    and know every source operator of ``cfg``."""
     for name in ("acl.json5", "users.txt"):
         if not (access / name).is_file():
             raise AccessControlMissingError(
                 f"{access / name} is missing: the demo will not run a router without access "
                 "control (reinstall tltrack to restore the package's access/ files)"
             )
+    known = passwords(access / "users.txt")
+    unknown = [s.id for s in (cfg.sources if cfg else []) if f"source-{s.id}" not in known]
+    if unknown:
+        ids = sorted(u.removeprefix("source-") for u in known if u.startswith("source-"))
+        raise AccessControlMissingError(
+            f"the shipped access control knows sources {', '.join(ids)}, not {unknown}: "
+            "rename the sources, or add them (deploy/zenoh/README.md)"
+        )
 
 
 def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
@@ -201,9 +211,35 @@ class Stack:
         access = router_access_env() if self.secure else {}
         self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
 
-    def start_service(self, name: str, *flags: str, env: dict[str, str] | None = None) -> None:
-        identity = identity_env(IDENTITY[name]) if self.secure else {}
-        self.start(name, ["-m", f"tltrack.services.{name}", *flags], {**identity, **(env or {})})
+    def start_service(
+        self,
+        name: str,
+        *flags: str,
+        env: dict[str, str] | None = None,
+        service: str | None = None,
+        identity: str | None = None,
+    ) -> None:
+        """Start ``service`` (default: ``name``) as process ``name``, under ``identity``
+        (default: the service's, :data:`IDENTITY`) when the stack is secure."""
+        module = service or name
+        creds = identity_env(identity or IDENTITY[module]) if self.secure else {}
+        self.start(name, ["-m", f"tltrack.services.{module}", *flags], {**creds, **(env or {})})
+
+    def start_trackers(self, cfg: Config) -> list[str]:
+        """The primary's tracker and one tracker per source of ``cfg``, each under its operator's
+        identity; returns the liveliness tokens (``operator:service``) sensor_sim must await."""
+        self.start_service("primary_tracker")
+        wait = ["primary:primary_tracker", "referee:scorer"]
+        for src in cfg.sources:
+            one = len(cfg.sources) == 1 and src.id == "s1"
+            self.start_service(
+                "source_tracker" if one else f"source_tracker_{src.id}",
+                service="source_tracker",
+                identity=f"source-{src.id}",
+                env={"TLTRACK_SOURCE_SOURCE_ID": src.id},
+            )
+            wait.append(f"source/{src.id}:source_tracker")
+        return wait
 
     def wait(self, name: str, timeout: float) -> int | None:
         try:
@@ -294,22 +330,25 @@ def serve_until_interrupted(stack: Stack, name: str) -> None:
 
 
 def sim_flags(
-    steps: int,
-    particles: int,
+    steps: int | None,
+    particles: int | None,
     pace: float,
     realtime: bool,
-    preset: str,
-    truth: str,
-    seed: int,
+    preset: str | None,
+    truth: str | None,
+    seed: int | None,
     episodes: int = 1,
+    config: Path | None = None,
 ) -> list[str]:
-    flags = [
-        f"--steps={steps}",
-        f"--particles={particles}",
-        f"--pace={pace}",
-        f"--preset={preset}",
-        f"--truth={truth}",
-        f"--seed={seed}",
-        f"--episodes={episodes}",
-    ]
+    """sensor_sim's flags: the config file (if any), then every setting given (not None)."""
+    given = {
+        "config": config,
+        "steps": steps,
+        "particles": particles,
+        "preset": preset,
+        "truth": truth,
+        "seed": seed,
+    }
+    flags = [f"--{k}={v}" for k, v in given.items() if v is not None]
+    flags += [f"--pace={pace}", f"--episodes={episodes}"]
     return [*flags, "--realtime=true"] if realtime else flags

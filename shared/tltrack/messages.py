@@ -32,8 +32,11 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from tltrack.config import SENSOR_NZ, STATE_DIM, SensorSpec
+
 #: 2: Truth and EstimateMsg carry ``pos``, the position in ``x`` (the referee needs no state
-#: layout), and EstimateMsg whether the filter was reinitialised (``recovered``)
+#: layout), EstimateMsg whether the filter was reinitialised (``recovered``), a Transfer the
+#: sensor it is expressed in (``sensor``); sizes follow n_x and n_z
 SCHEMA_VERSION = 2
 SUPPORTED_VERSIONS = frozenset({2})
 
@@ -41,6 +44,8 @@ MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
 SYMMETRY_RTOL = 1e-9
 MAX_K = 2**31 - 1
+STATE_SIZES = tuple(sorted(set(STATE_DIM.values())))  #: n_x of every scenario
+MEASUREMENT_SIZES = tuple(sorted(set(SENSOR_NZ.values())))  #: n_z of every sensor kind
 
 #: Every ``MessageRejected.reason``.
 REASONS = (
@@ -121,6 +126,20 @@ def _check_covariance(P: list[list[float]], n: int, name: str) -> list[list[floa
     return P
 
 
+def _sensor_spec(v: Any) -> Any:
+    """A sensor description from its plain map (as msgpack gives it: lists, not tuples)."""
+    if isinstance(v, SensorSpec):
+        return v
+    try:
+        return SensorSpec.model_validate(v)
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "its parameters"
+        detail = {"where": where, "msg": first["msg"]}
+        reason = "non_finite" if first["type"] == "finite_number" else "invalid"
+        raise PydanticCustomError(reason, "{where}: {msg}", detail) from None
+
+
 def _all_finite(obj: Any) -> bool:
     if isinstance(obj, float):
         return math.isfinite(obj)
@@ -156,7 +175,8 @@ class Message(BaseModel):
 
 
 class Measurement(Message):
-    """One sensor's range-bearing measurement z_k = [r, bearing] of step k."""
+    """One sensor's measurement z_k of step k, in that sensor's components (its tracker checks
+    that the size is its sensor's)."""
 
     TYPE: ClassVar[str] = "measurement"
     type: Literal["measurement"] = "measurement"
@@ -166,7 +186,7 @@ class Measurement(Message):
     @field_validator("z")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (2,), "z")
+        return _check_vector(v, MEASUREMENT_SIZES, "z")
 
 
 class Truth(Message):
@@ -180,7 +200,7 @@ class Truth(Message):
     @field_validator("x")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (4, 5), "x")
+        return _check_vector(v, STATE_SIZES, "x")
 
     @field_validator("pos")
     @classmethod
@@ -189,7 +209,9 @@ class Truth(Message):
 
 
 class Transfer(Message):
-    """The source's predicted-observation density N(eta, P_eta) for step ``k_apply``.
+    """The source's predicted-observation density N(eta, P_eta) for step ``k_apply``, in the
+    coordinates of the source's sensor, which ``sensor`` describes (kind, position, noise
+    parameters): a primary needs nothing else to use it.
 
     ``k`` is the source step that produced it, so ``k == k_apply - 1``.
     """
@@ -197,25 +219,19 @@ class Transfer(Message):
     TYPE: ClassVar[str] = "transfer"
     type: Literal["transfer"] = "transfer"
     k_apply: Annotated[int, Field(ge=1, le=MAX_K)]
+    sensor: Annotated[SensorSpec, BeforeValidator(_sensor_spec)]
     eta: Vector
     P_eta: Matrix
 
-    @field_validator("eta")
-    @classmethod
-    def _eta_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (2,), "eta")
-
-    @field_validator("P_eta")
-    @classmethod
-    def _P_ok(cls, v: list[list[float]]) -> list[list[float]]:
-        return _check_covariance(v, 2, "P_eta")
-
     @model_validator(mode="after")
-    def _steps(self) -> Transfer:
+    def _consistent(self) -> Transfer:
         if self.k != self.k_apply - 1:
             raise PydanticCustomError(
                 "invalid", f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1})"
             )
+        n_z = self.sensor.n_z
+        _check_vector(self.eta, (n_z,), "eta")
+        _check_covariance(self.P_eta, n_z, "P_eta")
         return self
 
 
@@ -236,7 +252,7 @@ class EstimateMsg(Message):
     @field_validator("x")
     @classmethod
     def _x_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (4, 5), "x")
+        return _check_vector(v, STATE_SIZES, "x")
 
     @field_validator("pos")
     @classmethod

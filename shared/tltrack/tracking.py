@@ -12,15 +12,17 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from functools import lru_cache
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
-from tltrack.config import Config
-from tltrack.engine.montecarlo import reported_name
+from tltrack.config import Config, SensorSpec
+from tltrack.engine.montecarlo import check_filters, reported_name
 from tltrack.engine.registry import build, parse, recovery
 from tltrack.engine.scenario import initial_estimate
-from tltrack.filters.base import Estimate, Filter
+from tltrack.filters.base import Array, Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
 from tltrack.messages import (
@@ -32,8 +34,15 @@ from tltrack.messages import (
     RejectCounter,
     Transfer,
 )
-from tltrack.models.base import Layout
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
+from tltrack.models.base import Layout, MeasurementModel, PositionFix
+from tltrack.models.from_config import (
+    PRIMARY,
+    from_spec,
+    intensity,
+    motion_model,
+    sensor,
+    sensor_spec,
+)
 from tltrack.models.observation import Observation
 from tltrack.transport import Received, decode_received
 
@@ -45,15 +54,33 @@ def _filter(cfg: Config, name: str, run: int, source_id: str | None = None) -> F
     return build(parse(name), cfg, motion_model(cfg), x0_hat, [run], source_id)
 
 
-def measurement(cfg: Config, msg: Measurement, sensor_id: str) -> Observation:
-    """z_k with the sensor's own Q_w."""
-    s = sensor(cfg, sensor_id)
-    return Observation.broadcast(s, np.asarray(msg.z), s.R(intensity(cfg, sensor_id)))
+@dataclass(frozen=True)
+class OwnSensor:
+    """An operator's sensor and its Q_w: what turns its Measurement into an Observation."""
+
+    model: MeasurementModel
+    R: Array
+
+    @classmethod
+    def of(cls, cfg: Config, sensor_id: str) -> OwnSensor:
+        s = sensor(cfg, sensor_id)
+        return cls(s, s.R(intensity(cfg, sensor_id)))
+
+    def observe(self, msg: Measurement) -> Observation:
+        """z_k with the sensor's own Q_w."""
+        return Observation.broadcast(self.model, np.asarray(msg.z), self.R)
 
 
-def transfer(cfg: Config, msg: Transfer, source_id: str) -> Observation:
-    """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor."""
-    obs = Observation.broadcast(sensor(cfg, source_id), np.asarray(msg.eta), np.asarray(msg.P_eta))
+@lru_cache(maxsize=64)
+def _described(spec: SensorSpec, layout: Layout) -> MeasurementModel:
+    return from_spec(spec, layout)
+
+
+def transfer(msg: Transfer, source_id: str, layout: Layout) -> Observation:
+    """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor,
+    which the transfer itself describes."""
+    s = _described(msg.sensor, layout)
+    obs = Observation.broadcast(s, np.asarray(msg.eta), np.asarray(msg.P_eta))
     return dataclasses.replace(obs, origin=source_id)
 
 
@@ -106,13 +133,18 @@ class SourceEpisode:
         self.layout = motion_model(cfg).layout
         spec = parse(f"source-{kind}")
         self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
-        s = sensor(cfg, source_id)
+        self.sensor = OwnSensor.of(cfg, source_id)
+        self.sensor_spec = sensor_spec(cfg, source_id)  #: what its transfers say it is
         filt = _filter(cfg, spec.name, run, source_id)
-        self.role = Source(filt, s, s.R(intensity(cfg, source_id)), recovery(spec, cfg))
+        self.role = Source(filt, self.sensor.model, self.sensor.R, recovery(spec, cfg))
+
+    @property
+    def n_z(self) -> int:
+        return self.sensor.model.n_z
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
-        return self.role.step(None if z is None else measurement(self.cfg, z, self.source_id))
+        return self.role.step(None if z is None else self.sensor.observe(z))
 
     @property
     def recovered(self) -> bool:
@@ -131,7 +163,10 @@ class PrimaryEpisode:
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
         self.layout = motion_model(cfg).layout
+        self.sensor = OwnSensor.of(cfg, PRIMARY)
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
+        if robust:
+            check_filters(cfg, [self.tl_name])
         policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget) if robust else None
         self.iso = Primary(
             _filter(cfg, self.iso_name, run), None, recovery(parse(self.iso_name), cfg)
@@ -149,15 +184,28 @@ class PrimaryEpisode:
         """(TL estimate, isolated estimate); ``transfers`` maps source id -> its transfer for k.
 
         ``z=None``: the primary's own measurement never came; the transfers alone update.
+        Transfers come in the engine's order: the episode's sources first, then any other
+        source (each transfer describes its own sensor), by id.
         """
-        obs = None if z is None else measurement(self.cfg, z, PRIMARY)
-        extra = [
-            transfer(self.cfg, transfers[s.id], s.id) for s in self.cfg.sources if s.id in transfers
-        ]  # the engine's order
+        obs = None if z is None else self.sensor.observe(z)
+        known = [s.id for s in self.cfg.sources]
+        order = [*known, *sorted(set(transfers) - set(known))]
+        extra = [transfer(transfers[sid], sid, self.layout) for sid in order if sid in transfers]
+        if self.tl.policy is not None:  # robust: only what it can judge (check_filters)
+            extra = [t for t in extra if isinstance(t.sensor, PositionFix)]
         tl = self.tl.step(obs, extra)
         if self.tl.twin is not None and self.tl.twin_estimate is not None:
             return tl, self.tl.twin_estimate  # the twin stepped inside the robust primary
         return tl, self.iso.step(obs)
+
+    @property
+    def n_z(self) -> int:
+        return self.sensor.model.n_z
+
+    @property
+    def names(self) -> tuple[str, str]:
+        """The reported names of its (TL, isolated) filters."""
+        return self.tl_name, self.iso_name
 
     @property
     def used_transfer(self) -> bool:
@@ -233,9 +281,13 @@ class StepQueue(Generic[T]):
 
 
 class Tracked(Protocol):
-    """What an episode's state needs for :meth:`Episodes.offer`: its queue of measurements."""
+    """What an episode's state needs for :meth:`Episodes.offer`: its queue of measurements, and
+    the size of its sensor's measurement."""
 
     steps: StepQueue[Measurement]
+
+    @property
+    def n_z(self) -> int: ...
 
 
 E = TypeVar("E", bound=Tracked)
@@ -307,13 +359,17 @@ class Episodes(Generic[E]):
     def offer(self, e: str, key: str, z: Measurement, rejects: RejectCounter) -> None:
         """Queue ``z`` in its episode's step order; held while the episode is not yet open.
 
-        A duplicate, a stale step, one far ahead, or one of an episode that never opens (once
-        the hold is full) is counted under its key.
+        A measurement of the wrong size for the sensor, a duplicate, a stale step, one far
+        ahead, or one of an episode that never opens (once the hold is full) is counted under
+        its key.
         """
         ep = self.get(e)
         if ep is None:
             if not self.hold(e, lambda: self.offer(e, key, z, rejects)):
                 rejects.add(key, "unknown_episode")
+            return
+        if len(z.z) != ep.n_z:
+            rejects.add(key, "bad_shape")
             return
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":

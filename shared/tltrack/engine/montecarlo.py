@@ -27,7 +27,7 @@ from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_name
 from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
-from tltrack.filters.decision import TransferPolicy
+from tltrack.filters.decision import TransferPolicy, position_fix
 from tltrack.filters.particle import warm_up
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models.base import Layout, MotionModel
@@ -143,6 +143,14 @@ def run_batch(
     run, which is how a live tracker steps. With ``keep_tracks``, keep every estimate too.
     """
     return run_sweep_batch([cfg], names, runs, timing=timing, keep_tracks=keep_tracks)[0]
+
+
+def check_filters(cfg: Config, names: Sequence[str]) -> None:
+    """Refuse, before any run, filters that cannot work with the configured sensors: a
+    ``ValueError`` that says why (robust transfer needs sensors that fix a position)."""
+    if any(parse(n).role == "robust" for n in names):
+        for sid in [PRIMARY, *(s.id for s in cfg.sources)]:
+            position_fix(sensor(cfg, sid))
 
 
 def check_sweep(cfgs: Sequence[Config]) -> None:
@@ -375,6 +383,7 @@ def run_sweep(
     intensity), running the sources once for all of them; see :func:`run_sweep_batch`."""
     check_sweep(cfgs)
     cfg = cfgs[0]
+    check_filters(cfg, names)
     bs = batch_size or default_batch_size(cfg, names)
     batches = [list(range(i, min(i + bs, cfg.runs))) for i in range(0, cfg.runs, bs)]
     workers = max(1, min(workers or os.cpu_count() or 1, len(batches)))

@@ -51,12 +51,22 @@ from tltrack.models.observation import Observation
 Array = NDArray[np.float64]
 
 
+class NotComparableError(ValueError):
+    """Robust transfer was asked of sensors whose measurements it cannot compare."""
+
+
 def position_fix(sensor: MeasurementModel) -> PositionFix:
-    """``sensor`` as a :class:`PositionFix`; a ``TypeError`` naming its kind if it fixes none."""
+    """``sensor`` as a :class:`PositionFix`, or :class:`NotComparableError` naming its kind.
+
+    The policy compares a transfer with the primary's own measurement without any filter prior
+    (see the module docstring), so both must fix a position on their own: a bearing-only
+    sensor's does not, and such a pair is refused at start rather than judged blindly.
+    """
     if not isinstance(sensor, PositionFix):
-        raise TypeError(
-            f"robust transfer compares positions, and a {sensor.kind} sensor's measurement "
-            "fixes none"
+        raise NotComparableError(
+            f"robust transfer compares each transfer with the primary's measurement as "
+            f"positions, without a filter prior; a {sensor.kind} sensor's measurement fixes no "
+            "position, so use tl- (unjudged transfer) with it"
         )
     return sensor
 

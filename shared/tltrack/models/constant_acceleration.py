@@ -1,0 +1,59 @@
+"""Nearly-constant-acceleration motion: x = [x, vx, ax, y, vy, ay], x_k = A x_{k-1} + v.
+
+The discrete Wiener process acceleration model (Bar-Shalom, Li & Kirubarajan 2001, sec. 6.3.3):
+per axis the acceleration is a random walk whose increment over one period, of variance q, acts on
+position, velocity and acceleration through Gamma = [T^2/2, T, 1]'. So Q_v = q Gamma Gamma' per
+axis: rank 1 per axis, rank 2 in all, singular like the CV model's, and sampled through its exact
+square root ``Q_sqrt`` (6 x 2).
+
+Each axis keeps its position, velocity and acceleration together, unlike CV's and CT's layouts;
+that sensors and scoring find the position at (0, 3) proves they read it through the layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.models.base import Layout
+
+Array = NDArray[np.float64]
+
+
+def dwpa_sqrt(T: float, q: float) -> Array:
+    """Square root sqrt(q) [T^2/2, T, 1]' of one axis' Wiener-process-acceleration block."""
+    return np.sqrt(q) * np.array([[T * T / 2.0], [T], [1.0]])
+
+
+@dataclass(frozen=True)
+class ConstantAcceleration:
+    """Constant acceleration per axis, whose increment per period has variance q (m^2/s^4)."""
+
+    T: float
+    q: float
+    n: int = 6
+    layout: ClassVar[Layout] = Layout(pos=(0, 3), vel=(1, 4))
+    Q: Array = field(init=False, repr=False)
+    Q_sqrt: Array = field(init=False, repr=False)
+    A: Array = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        T = self.T
+        block = np.array([[1.0, T, T * T / 2.0], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+        A = np.zeros((6, 6))
+        A[0:3, 0:3] = A[3:6, 3:6] = block
+        L = np.zeros((6, 2))
+        L[0:3, 0:1] = dwpa_sqrt(T, self.q)
+        L[3:6, 1:2] = dwpa_sqrt(T, self.q)
+        object.__setattr__(self, "A", A)
+        object.__setattr__(self, "Q_sqrt", L)
+        object.__setattr__(self, "Q", L @ L.T)
+
+    def f(self, x: Array) -> Array:
+        return np.tensordot(self.A, x, axes=1)
+
+    def F(self, x: Array) -> Array:
+        return self.A
