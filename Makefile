@@ -30,8 +30,8 @@ warm: $(STAMP)
 	$(BIN)/python -c "from tltrack.filters.particle import warm_up; warm_up()"
 
 lint: $(STAMP)
-	$(BIN)/ruff check shared services tests
-	$(BIN)/ruff format --check shared services tests
+	$(BIN)/ruff check shared services tests examples benchmarks scripts
+	$(BIN)/ruff format --check shared services tests examples benchmarks scripts
 	$(BIN)/mypy
 
 ## Benchmarks (not tests): filter step times and speedups.

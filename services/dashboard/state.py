@@ -20,6 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.models.from_config import PRIMARY, sensor_spec
 
 Role = Literal["source", "tl", "isolated"]
 Verdict = Literal["new", "duplicate", "capacity"]
@@ -83,7 +84,7 @@ class Episode:
     steps_per_sec: float | None = None
     started: float | None = None
     ended: str | None = None  #: the end reason once EpisodeEnd arrived
-    sensors: dict[str, XY] = field(default_factory=dict)
+    sensors: dict[str, tuple[XY, str]] = field(default_factory=dict)  #: id -> (where, kind)
     truth: dict[int, XY] = field(default_factory=dict)
     tracks: dict[str, Track] = field(default_factory=dict)
 
@@ -182,11 +183,11 @@ class State:
             self._episodes.move_to_end(m.episode)  # a new episode becomes the one on show
             ep.run, ep.K, ep.started = m.run, m.K, m.t_sensor
             ep.steps_per_sec = m.steps_per_sec
-            cfg = m.config
-            ep.sensors = {"primary": _pair(cfg.get("primary_position"))}
-            for src in cfg.get("sources", [])[:16]:
-                if isinstance(src, dict) and isinstance(src.get("id"), str):
-                    ep.sensors[src["id"]] = _pair(src.get("position"))
+            cfg = m.parsed_config()  # validated on receipt
+            ep.sensors = {}
+            for sid in [PRIMARY, *(s.id for s in cfg.sources[:16])]:
+                spec = sensor_spec(cfg, sid)
+                ep.sensors[sid] = (_pair(spec.position), spec.kind)
             self.version += 1
 
     def on_end(self, m: EpisodeEnd) -> None:
@@ -350,7 +351,10 @@ class State:
             "started": ep.started,
             "ended": ep.ended,
             "last_k": last,
-            "sensors": [{"name": n, "x": p[0], "y": p[1]} for n, p in ep.sensors.items()],
+            "sensors": [
+                {"name": n, "x": p[0], "y": p[1], "kind": kind}
+                for n, (p, kind) in ep.sensors.items()
+            ],
             "truth": [[truth[i][0], *truth[i][1]] for i in _thin(len(truth), self.max_points)],
             "filters": filters,
             "transfer": transfer,

@@ -16,6 +16,9 @@ What one "step" is, per name:
   (5, N) layout, noise as Q_sqrt times ``standard_normal``, log-likelihoods with ``hypot`` and
   ``arctan2``, resampling with ``cumsum`` + ``searchsorted``, then the mean and covariance. It is a
   yardstick, deliberately untuned;
+- ``user-model``: the ``tl-pf`` step with sensors the fast path does not know (a user's own
+  range-bearing class, :class:`UserRangeBearing`): the particle filter's generic NumPy path for
+  the likelihood and the predicted observation, as any new sensor gets until it has a kernel;
 - ``stonesoup``: Stone Soup's particle filter (``ParticlePredictor`` with its ``ConstantTurn``
   model, ``ParticleUpdater`` with ``CartesianToBearingRange`` and systematic resampling, then the
   mean and covariance); ``None`` when the optional ``stonesoup`` package is not installed.
@@ -28,6 +31,7 @@ from __future__ import annotations
 import gc
 import time
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -42,9 +46,19 @@ from tltrack.models.angles import wrap_angle
 from tltrack.models.base import MotionModel
 from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
+from tltrack.models.range_bearing import RangeBearing
 
 Array = NDArray[np.float64]
-NAMES = ("tl-pf", "pf", "source-pf", "numpy-baseline", "stonesoup")
+NAMES = ("tl-pf", "pf", "source-pf", "user-model", "numpy-baseline", "stonesoup")
+
+
+#: the steps that take the source's transfer: timed only once there is one (from k = 2)
+TL_STEPS = ("tl-pf", "user-model", "numpy-baseline")
+
+
+@dataclass(frozen=True)
+class UserRangeBearing(RangeBearing):
+    """The paper's sensor under a type the fast path does not list: a user's own model."""
 
 
 class NumpyBaseline:
@@ -139,6 +153,9 @@ def _one_pass(
     sim = simulate(cfg, 0)
     sid = cfg.sources[0].id
     s_p, s_s = sensor(cfg, PRIMARY), sensor(cfg, sid)
+    rb = [s for s in (s_p, s_s) if isinstance(s, RangeBearing)]
+    if len(rb) != 2:
+        raise ValueError("the bench compares range-bearing filters: both sensors must be one")
     R_p, R_s = s_p.R(intensity(cfg, PRIMARY)), s_s.R(intensity(cfg, sid))
     x0 = sim.x0_hat[:, None]
     P0 = np.diag(cfg.P0_diag)
@@ -147,33 +164,36 @@ def _one_pass(
         return ParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
 
     source = Source(pf("source-pf"), s_s, R_s)
-    tl = Primary(pf("tl-pf"))
-    iso = Primary(pf("pf"))
+    tl, iso, user = Primary(pf("tl-pf")), Primary(pf("pf")), Primary(pf("user-model"))
+    u_p, u_s = (UserRangeBearing(s.sigma_r, s.sigma_bearing, s.layout, s.position) for s in rb)
     base = NumpyBaseline(model, sim.x0_hat, P0, cfg.particles, stream(seed, 0, "numpy-baseline"))
     ss = (
         _stonesoup_stepper(cfg, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed)
         if (with_stonesoup)
         else None
     )
-    names = [n for n in NAMES if n != "stonesoup" or ss is not None]
 
-    def run(
-        name: str, k: int, z_p: Observation, z_s: Observation, transfer: Observation | None
-    ) -> Observation | None:
-        if name == "source-pf":
-            return source.step(z_s)[1]
-        if name == "tl-pf":
-            tl.step(z_p, [transfer] if transfer is not None else [])
-        elif name == "pf":
-            iso.step(z_p)
-        elif name == "numpy-baseline":
-            stmts = [(sim.z[PRIMARY][k - 1], R_p, s_p.position)]
-            if transfer is not None:
-                stmts.append((transfer.mean[:, 0], transfer.cov[0], s_s.position))
-            base.step(stmts)
-        elif ss is not None:
-            ss(k)
-        return None
+    def baseline(k: int, z_p: Observation, t: Observation | None) -> None:
+        stmts = [(sim.z[PRIMARY][k - 1], R_p, s_p.position)]
+        if t is not None:
+            stmts.append((t.mean[:, 0], t.cov[0], s_s.position))
+        base.step(stmts)
+
+    def user_step(z_p: Observation, t: Observation | None) -> None:
+        mine = replace(z_p, sensor=u_p)
+        user.step(mine, [] if t is None else [replace(t, sensor=u_s)])
+
+    #: name -> one step, given (k, z_p, z_s, the transfer for k); a source returns its next one
+    steppers: dict[str, Callable[[int, Observation, Observation, Observation | None], Any]] = {
+        "source-pf": lambda k, z_p, z_s, t: source.step(z_s)[1],
+        "tl-pf": lambda k, z_p, z_s, t: tl.step(z_p, [] if t is None else [t]),
+        "pf": lambda k, z_p, z_s, t: iso.step(z_p),
+        "user-model": lambda k, z_p, z_s, t: user_step(z_p, t),
+        "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, z_p, t),
+    }
+    if ss is not None:
+        steppers["stonesoup"] = lambda k, z_p, z_s, t: ss(k)
+    names = [n for n in NAMES if n in steppers]
 
     transfer: Observation | None = None
     clock = time.perf_counter
@@ -187,10 +207,10 @@ def _one_pass(
         for i in order.permutation(len(names)):
             name = names[i]
             t0 = clock()
-            got = run(name, k, z_p, z_s, transfer)
+            got = steppers[name](k, z_p, z_s, transfer)
             dt = clock() - t0
             upcoming = got if name == "source-pf" else upcoming
-            if transfer is not None or name not in ("tl-pf", "numpy-baseline"):
+            if transfer is not None or name not in TL_STEPS:
                 times[name].append(dt)  # k = 1 has no transfer yet: not a TL step
         transfer = upcoming
     return ss is not None
@@ -240,9 +260,11 @@ def run_bench(
         v = ms[name]
         return None if v is None else v / tl
 
+    user, baseline = ms["user-model"], ms["numpy-baseline"]
     return {
         "ms_per_step": ms,
         "speedup": {"numpy-baseline": ratio("numpy-baseline"), "stonesoup": ratio("stonesoup")},
+        "user_model_over_numpy_baseline": None if user is None or not baseline else user / baseline,
     }
 
 
@@ -253,6 +275,8 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"{name:<16}{'n/a' if v is None else f'{v:.3f}':>10}")
     for name, v in result["speedup"].items():
         lines.append(f"tl-pf speedup vs {name}: {'n/a' if v is None else f'{v:.1f}x'}")
+    u = result.get("user_model_over_numpy_baseline")
+    lines.append(f"user-model / numpy-baseline: {'n/a' if u is None else f'{u:.2f}x'}")
     return "\n".join(lines)
 
 

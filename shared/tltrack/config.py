@@ -41,10 +41,11 @@ SENSOR_NZ = {"range-bearing": 2, "bearing": 1, "position": 2, "range-bearing-dop
 _DEG = math.pi / 180.0
 
 #: Scenario 1 (constant velocity) and Scenario 2 (coordinated turn), as printed in the seed, and a
-#: constant-acceleration scenario of ours: x = [x, vx, ax, y, vy, ay], starting where Scenario 2
-#: does with a 3 m/s^2 lateral acceleration; q1 is the variance of the acceleration's increment
-#: per step (m^2/s^4, a discrete Wiener-process acceleration), so the acceleration wanders by
-#: about 0.3 m/s^2 per step.
+#: constant-acceleration scenario of ours: x = [x, vx, ax, y, vy, ay], a slow target (a boat, a
+#: drone) starting where Scenario 2 does at 30 m/s with a 0.5 m/s^2 lateral acceleration, so that
+#: it stays within about 5 km of the sensors over 100 steps; q1 is the variance of the
+#: acceleration's increment per step (m^2/s^4, a discrete Wiener-process acceleration): it
+#: wanders by about 0.1 m/s^2 per step.
 SCENARIO_DEFAULTS: dict[str, dict[str, Any]] = {
     "cv": {
         "x0": [100.0, 10.0, 100.0, 10.0],
@@ -59,9 +60,9 @@ SCENARIO_DEFAULTS: dict[str, dict[str, Any]] = {
         "q2": 1.75e-2,
     },
     "ca": {
-        "x0": [1000.0, 300.0, 0.0, 1000.0, 0.0, 3.0],
-        "P0_diag": [100.0, 10.0, 1.0, 100.0, 10.0, 1.0],
-        "q1": 0.1,
+        "x0": [1000.0, 30.0, 0.0, 1000.0, 0.0, 0.5],
+        "P0_diag": [100.0, 10.0, 0.1, 100.0, 10.0, 0.1],
+        "q1": 0.01,
         "q2": 0.0,
     },
 }

@@ -244,7 +244,8 @@ function drawTrajectory(ep, colors) {
   const sites = new Map();  // sensors sharing a position get one marker and one label
   for (const s of ep.sensors) {
     const at = `${s.x},${s.y}`;
-    sites.set(at, { x: s.x, y: s.y, names: [...(sites.get(at)?.names || []), s.name] });
+    const label = `${s.name} (${s.kind})`;  // who, and what it measures
+    sites.set(at, { x: s.x, y: s.y, names: [...(sites.get(at)?.names || []), label] });
   }
   ctx.font = "11px system-ui, sans-serif";
   ctx.textAlign = "left";
