@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
-from tltrack.config import Config, ConfigError, load_config, make_config
+from tltrack.config import Config
 from tltrack.engine.scenario import simulate
+from tltrack.engine.truth_file import experiment_config
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
 from tltrack.models.from_config import PRIMARY, motion_model, sensor
 from tltrack.service import Service, load_settings, setup_logging
@@ -42,6 +43,7 @@ class Settings(BaseSettings):
     scenario: Literal["cv", "ct"] | None = None
     preset: Literal["paper", "arasaratnam-haykin"] | None = None
     truth: Literal["fixed", "random", "noise-free"] | None = None
+    truth_file: Path | None = Field(None, description="a recorded track (CSV) as the truth")
     seed: int | None = Field(None, ge=0)
     steps: int | None = Field(None, ge=1, description="K, steps per episode")
     particles: int | None = Field(None, ge=10)
@@ -74,8 +76,9 @@ class Settings(BaseSettings):
             "K": self.steps,
             "particles": self.particles,
             "primary_intensity": self.primary_intensity,
+            "truth_file": self.truth_file,
         }
-        return load_config(self.config, **over) if self.config else make_config(**over)
+        return experiment_config(self.config, **over)
 
 
 class Simulator:
@@ -178,7 +181,7 @@ def main(argv: list[str] | None = None) -> None:
     setup_logging(settings.log_level)
     try:
         cfg = settings.experiment_config()
-    except ConfigError as err:
+    except ValueError as err:  # a ConfigError, or a truth file refused
         log.error("invalid configuration: %s", err)
         raise SystemExit(2) from None
     with Service(NAME, keys.REFEREE, settings.zenoh) as svc:

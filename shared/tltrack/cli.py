@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from tltrack.config import Config, ConfigError, FilterKind, load_config, make_config
+from tltrack.config import Config, ConfigError, FilterKind
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -37,6 +37,7 @@ def progress_bar(total: int, what: str) -> Progress:
 
 def build_config(config: Path | None, **overrides: Any) -> Config:
     """Preset/file first, then any option given on the command line; exits with the field named."""
+    from tltrack.engine.truth_file import experiment_config
     source_intensity = overrides.pop("source_intensity", None)
     sources = overrides.pop("sources", None)
     fault = overrides.pop("source_fault", None)
@@ -46,7 +47,7 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
             raise ConfigError("--sources: give either --sources or --source-intensity, not both")
         if sources is not None:
             overrides["sources"] = _parse_sources(sources)
-        cfg = load_config(config, **overrides) if config else make_config(**overrides)
+        cfg = experiment_config(config, **overrides)  # completed from a truth file, if any
         if source_intensity is not None:
             cfg = cfg.with_source_intensity(source_intensity)
         if fault is not None:
@@ -59,7 +60,7 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
             cfg = cfg.with_(
                 sources=[{**s.model_dump(), "filter": source_filter} for s in cfg.sources]
             )
-    except ConfigError as err:
+    except ValueError as err:  # a ConfigError, or a truth file refused
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
     return cfg
@@ -105,6 +106,10 @@ def experiment(
     truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free")] = None,
     seed: Annotated[int | None, typer.Option(help="master seed of every random stream")] = None,
     truth_seed: Annotated[int | None, typer.Option(help="seed of the fixed truth")] = None,
+    truth_file: Annotated[
+        Path | None,
+        typer.Option(help="a recorded track as the truth (CSV t,x,y or t,lat,lon); no --truth"),
+    ] = None,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/experiment"),
     recovery: Annotated[
         bool | None,
@@ -133,6 +138,7 @@ def experiment(
         truth=truth,
         seed=seed,
         truth_seed=truth_seed,
+        truth_file=truth_file,
         sources=sources,
         source_fault=source_fault,
         source_filter=source_filter,

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError,
 
 Scenario = Literal["cv", "ct", "ca"]
 Preset = Literal["paper", "arasaratnam-haykin"]
-TruthMode = Literal["fixed", "random", "noise-free"]
+TruthMode = Literal["fixed", "random", "noise-free", "file"]
 SourceFault = Literal["none", "bias", "diverged", "stale"]
 #: the posterior approximations a filter may use (tltrack.engine.registry builds them)
 FilterKind = Literal["pf", "ukf", "ckf3", "ckf5"]
@@ -83,6 +83,8 @@ def preset_values(scenario: str, preset: str) -> dict[str, Any]:
 
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
+Longitude = Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)]
 Point = tuple[FiniteFloat, FiniteFloat]
 
 
@@ -162,6 +164,15 @@ class Config(BaseModel):
     )
     truth: TruthMode = "fixed"
     truth_seed: int = Field(0, ge=0)
+    truth_file: Path | None = Field(
+        None, description="a recorded track (CSV t,x,y or t,lat,lon) as the truth"
+    )
+    truth_origin: tuple[Latitude, Longitude] | None = Field(
+        None, description="(lat, lon) of the frame's origin for a t,lat,lon truth file"
+    )
+    truth_max_gap_s: float = Field(
+        120.0, gt=0, allow_inf_nan=False, description="longest gap between a truth file's reports"
+    )
     seed: int = Field(0, ge=0)
     particles: int = Field(6000, ge=10, le=10_000_000)
     runs: int = Field(100, ge=1)
@@ -180,6 +191,12 @@ class Config(BaseModel):
     def _fill_from_preset(cls, data: Any) -> Any:
         if not isinstance(data, dict):
             return data
+        if data.get("truth_file") is not None:
+            if data.get("truth") not in (None, "file"):
+                raise ValueError(
+                    f"give either truth_file or truth (the mode {data['truth']!r}), not both"
+                )
+            data = {**data, "truth": "file"}
         scenario = data.get("scenario", "ct")
         preset = data.get("preset", "paper")
         if scenario not in SCENARIO_DEFAULTS or preset not in PRESET_OVERRIDES:
@@ -197,6 +214,8 @@ class Config(BaseModel):
                 raise ValueError(f"{name} must be finite")
         if any(v <= 0 for v in self.P0_diag):
             raise ValueError("P0_diag must be positive")
+        if (self.truth == "file") != (self.truth_file is not None):
+            raise ValueError("truth 'file' needs a truth_file, and a truth_file needs truth 'file'")
         ids = [s.id for s in self.sources]
         if len(set(ids)) != len(ids):
             raise ValueError(f"sources: duplicate id in {ids}")
@@ -255,6 +274,11 @@ def make_config(data: dict[str, Any] | None = None, **overrides: Any) -> Config:
 
 def load_config(path: str | Path, **overrides: Any) -> Config:
     """Load a TOML or JSON file (by extension); keyword overrides win over the file."""
+    return make_config(read_mapping(path), **overrides)
+
+
+def read_mapping(path: str | Path) -> dict[str, Any]:
+    """The top-level table of a TOML or JSON config file (by extension), not yet validated."""
     p = Path(path)
     try:
         text = p.read_text()
@@ -268,4 +292,4 @@ def load_config(path: str | Path, **overrides: Any) -> Config:
         ) from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: the top level must be a table/object")
-    return make_config(data, **overrides)
+    return data

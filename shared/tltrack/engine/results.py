@@ -16,6 +16,7 @@ from tltrack.config import Config
 from tltrack.engine.montecarlo import FilterResult
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
+from tltrack.engine.truth_file import recorded_track
 from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 SCHEMA_VERSION = 1
@@ -64,12 +65,28 @@ def assemble(cfg: Config, results: dict[str, FilterResult]) -> dict[str, Any]:
     """The results document. Each filter's ``run_rmse`` lists every run's overall RMSE, in run
     order, so that anyone can compute paired differences between filters from it."""
     filters = {name: asdict(r) for name, r in results.items()}
-    return {
+    doc = {
         "schema_version": SCHEMA_VERSION,
         "provenance": provenance(),
         "config": cfg.model_dump(mode="json"),
         "filters": filters,
         "pcrlb": position_bounds(cfg),
+    }
+    if cfg.truth == "file":
+        doc["truth"] = truth_file_record(cfg)
+    return doc
+
+
+def truth_file_record(cfg: Config) -> dict[str, Any]:
+    """What a recorded truth was: the file's name and SHA-256, its frame's origin, K."""
+    track = recorded_track(cfg)
+    return {
+        "mode": "file",
+        "file": track.name,
+        "sha256": track.sha256,
+        "origin": track.origin,
+        "K": cfg.K,
+        "Ts": cfg.Ts,
     }
 
 

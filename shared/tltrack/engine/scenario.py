@@ -6,7 +6,8 @@ three readings exist:
 
 - ``fixed``: one realization from ``truth_seed``, shared by every run (the default);
 - ``random``: a fresh realization per run;
-- ``noise-free``: f applied with no process noise.
+- ``noise-free``: f applied with no process noise;
+- ``file``: a recorded track (:mod:`tltrack.engine.truth_file`), the same for every run.
 
 Measurements and the filters' initial estimate x0_hat ~ N(x0, P0) are fresh per run (the
 cubature-KF benchmark's convention), each from its own stream.
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 from tltrack.config import Config
 from tltrack.engine.faults import miscalibration, observed_truth
 from tltrack.engine.streams import stream
+from tltrack.engine.truth_file import file_truth
 from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 Array = NDArray[np.float64]
@@ -29,6 +31,8 @@ Array = NDArray[np.float64]
 
 def truth(cfg: Config, run: int) -> Array:
     """The true states x_0..x_K of one run, shape (K + 1, n_x)."""
+    if cfg.truth == "file":
+        return file_truth(cfg)
     model = motion_model(cfg)
     x = np.empty((cfg.K + 1, cfg.n_x))
     x[0] = cfg.x0

@@ -102,14 +102,17 @@ import hashlib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
+from tltrack.config import Config, ConfigError, make_config, read_mapping
 from tltrack.models.angles import wrap_angle
+from tltrack.models.from_config import PRIMARY, sensor_spec
 
 Array = NDArray[np.float64]
 
@@ -524,3 +527,86 @@ def load_truth(
         reports=reports,
         report_t=track.t - track.t[0],
     )
+
+
+# ---------------------------------------------------------------------------------- configuring
+
+
+def configure(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A config mapping with a ``truth_file``, completed from the file: ``truth = "file"``, K the
+    file's length unless the mapping sets a shorter one, and x0 the track's first state unless
+    the mapping sets one. Every sensor is then checked for clearance from the track.
+
+    Entry points (``tltrack experiment``, ``study``, sensor_sim) run it on the mapping they build
+    before making the :class:`~tltrack.config.Config`, so the config they share carries K and x0
+    explicitly: a tracker elsewhere never needs the file. Raises :class:`TruthFileError` or
+    :class:`~tltrack.config.ConfigError`.
+    """
+    if data.get("truth_file") is None:
+        return dict(data)
+    out = {**data}
+    if out.get("truth") not in (None, "file"):
+        raise ConfigError(
+            f"truth: give either truth_file or truth (the mode {out['truth']!r}), not both"
+        )
+    out["truth"] = "file"
+    draft = make_config(out)  # the scenario, Ts and the sensors, validated
+    track = recorded_track(draft)
+    if "K" not in out:
+        out["K"] = track.K
+    elif int(out["K"]) > track.K:
+        raise TruthFileError(
+            f"{track.name}: K = {out['K']} steps is longer than the track ({track.K} steps of "
+            f"{draft.Ts:g} s); a truth file's K may only shorten it"
+        )
+    if "x0" not in out:
+        out["x0"] = _states(draft, track)[0].tolist()
+    cfg = make_config(out)
+    where = {sid: sensor_spec(cfg, sid).position or (0.0, 0.0) for sid in _sensor_ids(cfg)}
+    check_clearance(track.positions[: cfg.K + 1], where, name=track.name)
+    return out
+
+
+def experiment_config(path: str | Path | None, **overrides: Any) -> Config:
+    """The config of a TOML/JSON file (if any) with the ``overrides`` that are not None on top,
+    completed from its truth file (:func:`configure`) if it has one; raises ``ValueError``."""
+    data = read_mapping(path) if path is not None else {}
+    data |= {k: v for k, v in overrides.items() if v is not None}
+    return make_config(configure(data))
+
+
+def file_truth(cfg: Config) -> Array:
+    """The truth x_0..x_K (K + 1, n_x) of a config whose truth is a file (see :func:`configure`).
+
+    Refuses a config whose x0 is not the track's first state: it was not built by
+    :func:`configure`, and its filters would start somewhere else.
+    """
+    x = _states(cfg, recorded_track(cfg))
+    if len(x) < cfg.K + 1:
+        raise TruthFileError(f"{cfg.truth_file}: K = {cfg.K} is longer than the track")
+    if not np.allclose(x[0], cfg.x0, rtol=1e-9, atol=1e-9):
+        raise TruthFileError(
+            f"{cfg.truth_file}: the config's x0 is not the track's first state; build the config "
+            "with tltrack.engine.truth_file.configure"
+        )
+    return x[: cfg.K + 1]
+
+
+def _sensor_ids(cfg: Config) -> list[str]:
+    return [PRIMARY, *(s.id for s in cfg.sources)]
+
+
+def recorded_track(cfg: Config) -> TruthTrack:
+    """The recorded track of a config whose truth is a file."""
+    if cfg.truth_file is None:
+        raise ValueError("this configuration's truth is not a file")
+    return _load(str(cfg.truth_file), cfg.Ts, cfg.truth_origin, cfg.truth_max_gap_s)
+
+
+@lru_cache(maxsize=8)
+def _load(path: str, Ts: float, origin: tuple[float, float] | None, max_gap_s: float) -> TruthTrack:
+    return load_truth(path, Ts, origin=origin, max_gap_s=max_gap_s)
+
+
+def _states(cfg: Config, track: TruthTrack) -> Array:
+    return full_state(track.positions, cfg.Ts, cfg.scenario)
