@@ -67,12 +67,41 @@ def test_help_has_examples():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["robust", "sources", "budget"])
+@pytest.mark.parametrize("name", ["robust", "sources", "budget", "heterogeneous"])
 def test_each_study_writes_its_table_with_paired_differences(tmp_path, name):
-    r = CliRunner().invoke(app, ["study", name, "--runs", "3", "--out", str(tmp_path)])
+    args = ["study", name, "--runs", "3", "--particles", "300", "--out", str(tmp_path)]
+    r = CliRunner().invoke(app, args)
     assert r.exit_code == 0, r.output
+    assert (tmp_path / f"{name}.json").exists()
     text = (tmp_path / f"{name}.md").read_text()
     rows = [ln for ln in text.splitlines() if ln.startswith("| ") and "---" not in ln]
     assert len(rows) >= 5, text  # a header and a row per configuration
     if name != "budget":
         assert re.search(r"[+-]\d+\.\d{3} \(\d+\.\d{3}\)", text), text  # difference (MC error)
+
+
+@pytest.mark.slow
+def test_the_realizations_study_places_the_papers_numbers_in_its_distribution(tmp_path):
+    args = ["study", "realizations", "--realizations", "3", "--runs", "2", "--particles", "200"]
+    args += ["--filters", "ukf,tl-ukf", "--out", str(tmp_path)]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    text = (tmp_path / "realizations.md").read_text()
+    ukf4 = next(ln for ln in text.splitlines() if ln.startswith("| 4 | ukf |"))
+    assert "17.95" in ukf4 and re.search(r"\d+ %", ukf4), ukf4  # Table 2's UKF, its percentile
+    assert (tmp_path / "realizations.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["robust", "--kind", "sir"], "--kind: unknown kind 'sir'"),
+        (["robust", "--source-filter", "x"], "--source-filter"),
+        (["realizations", "--realizations", "1"], "--realizations must be at least 2"),
+        (["nope"], "unknown study 'nope'"),
+        (["realizations", "--truth-file", "examples/tracks/x.csv"], "truth"),
+    ],
+)
+def test_bad_study_options_are_refused_naming_them(tmp_path, args, needle):
+    r = CliRunner().invoke(app, ["study", *args, "--runs", "2", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and needle in r.output, r.output

@@ -107,6 +107,54 @@ def curves(
     return _save(fig, path)
 
 
+def bars(
+    groups: Sequence[str],
+    series: Mapping[str, Sequence[float]],
+    path: Path,
+    *,
+    ylabel: str,
+    title: str,
+    log: bool = False,
+) -> Path:
+    """One group of bars per configuration, one bar per series (filters, bounds)."""
+    fig, ax = plt.subplots(figsize=(max(7.0, 2.2 * len(groups)), 4.5))
+    width = 0.8 / max(1, len(series))
+    x = np.arange(len(groups))
+    for i, (name, ys) in enumerate(series.items()):
+        ax.bar(x + (i - (len(series) - 1) / 2) * width, ys, width, label=name)
+    ax.set_xticks(x, groups, fontsize=7)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    if log:
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3, axis="y")
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
+def distributions(
+    samples: Mapping[str, Sequence[float]],
+    reference: Mapping[str, float | None],
+    path: Path,
+    *,
+    ylabel: str,
+    title: str,
+) -> Path:
+    """A box per sample set (whiskers 5-95 %), with a reference value as a cross where known."""
+    names = list(samples)
+    fig, ax = plt.subplots(figsize=(max(7.0, 0.9 * len(names)), 4.5))
+    ax.boxplot([samples[n] for n in names], whis=(5, 95), showfliers=True)
+    for j, n in enumerate(names, start=1):
+        ref = reference.get(n)
+        if ref is not None:
+            ax.plot(j, ref, "x", color="tab:red", ms=9, mew=2)
+    ax.set_xticks(range(1, len(names) + 1), names, rotation=45, ha="right", fontsize=7)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
 def _describe(doc: Mapping[str, Any]) -> str:
     c = doc["config"]
     return (

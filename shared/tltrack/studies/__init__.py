@@ -1,0 +1,20 @@
+"""Studies beyond the paper, one per module, each a markdown report, its numbers and a figure:
+
+- :mod:`~.robust`: robust transfer against honest, biased, diverged and stale sources;
+- :mod:`~.sources`: several source operators, honest or with a biased one among them;
+- :mod:`~.budget`: RMSE against the share of steps that use a transfer;
+- :mod:`~.heterogeneous`: operators with different sensors;
+- :mod:`~.realizations`: the paper's trajectory as a measured distribution.
+
+:mod:`~.common` holds what they share: a :class:`~.common.Setting` (runs, seed, filter kind,
+base configuration), a :class:`~.common.Runner` (how the engine runs) and paired differences.
+"""
+
+from tltrack.studies.budget import budget
+from tltrack.studies.common import Runner, Setting
+from tltrack.studies.heterogeneous import heterogeneous
+from tltrack.studies.realizations import realizations
+from tltrack.studies.robust import robust
+from tltrack.studies.sources import sources
+
+__all__ = ["Runner", "Setting", "budget", "heterogeneous", "realizations", "robust", "sources"]
