@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from concurrent.futures import Executor
 from pathlib import Path
 from typing import Any
 
@@ -57,13 +58,25 @@ def _row(cells: list[Any]) -> str:
     return "| " + " | ".join(str(c) for c in cells) + " |"
 
 
-def robust(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
+def robust(
+    runs: int,
+    out: Path,
+    progress: Progress = None,
+    seed: int = 0,
+    *,
+    workers: int | None = None,
+    batch_size: int | None = None,
+    executor: Executor | None = None,
+) -> Path:
     """pf, tl-pf and robust-tl-pf against an honest, biased, diverged and stale source."""
     res = {
         f: run_experiment(
             base(runs, seed).with_(sources=[{"id": "s1", "fault": f}]),
             ["pf", "tl-pf", "robust-tl-pf"],
             progress=progress,
+            workers=workers,
+            batch_size=batch_size,
+            executor=executor,
         )
         for f in FAULTS
     }
@@ -113,7 +126,16 @@ def robust(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Pa
     return _write(out, "robust", lines, {f: _plain(r) for f, r in res.items()})
 
 
-def sources(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
+def sources(
+    runs: int,
+    out: Path,
+    progress: Progress = None,
+    seed: int = 0,
+    *,
+    workers: int | None = None,
+    batch_size: int | None = None,
+    executor: Executor | None = None,
+) -> Path:
     """The primary's RMSE against the number of sources, honest or with one biased among them."""
     filters = ["pf", "tl-pf", "robust-tl-pf", "fusion-pf"]
     setups: dict[str, list[dict[str, Any]]] = {
@@ -127,7 +149,14 @@ def sources(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> P
     res, bounds = {}, {}
     for label, srcs in setups.items():
         cfg = base(runs, seed).with_(sources=srcs)
-        res[label] = run_experiment(cfg, filters, progress=progress)
+        res[label] = run_experiment(
+            cfg,
+            filters,
+            progress=progress,
+            workers=workers,
+            batch_size=batch_size,
+            executor=executor,
+        )
         bounds[label] = float(np.mean(_bound_all(cfg)))
     one, two = res["1 honest"]["tl-pf"], res["2 honest"]["tl-pf"]
     mixed = res["1 honest + 1 biased"]["robust-tl-pf"]
@@ -166,11 +195,25 @@ def sources(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> P
     return _write(out, "sources", lines, {lb: _plain(r) for lb, r in res.items()})
 
 
-def budget(runs: int, out: Path, progress: Progress = None, seed: int = 0) -> Path:
+def budget(
+    runs: int,
+    out: Path,
+    progress: Progress = None,
+    seed: int = 0,
+    *,
+    workers: int | None = None,
+    batch_size: int | None = None,
+    executor: Executor | None = None,
+) -> Path:
     """RMSE against the share of steps with a transfer (the hybrid primary's budget)."""
     res = {
         b: run_experiment(
-            base(runs, seed).with_(transfer_budget=b), ["pf", "robust-tl-pf"], progress=progress
+            base(runs, seed).with_(transfer_budget=b),
+            ["pf", "robust-tl-pf"],
+            progress=progress,
+            workers=workers,
+            batch_size=batch_size,
+            executor=executor,
         )
         for b in BUDGETS
     }
