@@ -22,6 +22,7 @@ private network, or use ``tls://`` addresses with Dask's security settings (READ
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import os
 import threading
@@ -239,11 +240,56 @@ def pool(
             ex.shutdown(wait=False)
 
 
+def probe(scheduler: str, timeout: float) -> None:
+    """Open a connection to ``scheduler`` and shake hands, within ``timeout`` s, or raise.
+
+    Dask's own connect bounds the TCP connection but not the handshake that follows: a port
+    that accepts and never speaks would hang the client forever. The probe runs on its own event
+    loop in a thread, and is cancelled cleanly when its time is up.
+    """
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    args = Security().get_connection_args("client")  # tls:// takes its settings from Dask's config
+
+    async def shake() -> None:
+        # Dask's own timeout first, as its message says more (refused, unreachable, ...)
+        comm = await asyncio.wait_for(connect(scheduler, timeout=timeout, **args), timeout + 2)
+        await comm.close()
+
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            asyncio.run(shake())
+        except BaseException as err:
+            failure.append(err)
+
+    t = threading.Thread(target=run, name="tltrack-dask-probe", daemon=True)
+    t.start()
+    t.join(timeout + 7)
+    if t.is_alive():
+        raise TimeoutError(f"no handshake within {timeout:.0f} s")
+    if failure:
+        err = failure[0]
+        raise (
+            TimeoutError(f"no handshake within {timeout:.0f} s")
+            if isinstance(err, asyncio.TimeoutError)
+            else err
+        )
+
+
 @contextmanager
 def _connected(client_type: type[Client], scheduler: str, timeout: float) -> Iterator[Client]:
     try:
+        probe(scheduler, timeout)
         client = client_type(scheduler, timeout=timeout, set_as_default=False, name="tltrack")
-    except (OSError, TimeoutError, ValueError) as err:
+    except (ValueError, TypeError) as err:  # not an address, or tls:// without TLS settings
+        raise SchedulerError(
+            f"cannot use {scheduler!r} as a Dask scheduler address: {err}. Addresses look like "
+            "tcp://HOST:8786, or tls://HOST:8786 with Dask's TLS settings (README)"
+        ) from None
+    except (OSError, TimeoutError) as err:
         raise SchedulerError(
             f"no Dask scheduler answers at {scheduler} (gave up after {timeout:.0f} s: "
             f"{err}). Start one (README, 'Monte-Carlo sweeps on a Dask cluster'), or drop "
