@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 import pytest
 from livestack import wait_until
+from test_compose import ROOT, _clean_env, _remove_leftovers, _run, compose, image  # noqa: F401
 from tltrack.cli import app
 from tltrack.config import Config, make_config
 from tltrack.engine import cluster
@@ -400,3 +402,90 @@ def test_a_scheduler_that_does_not_answer_gives_a_clear_error_within_30_s(tmp_pa
         assert f"no Dask scheduler answers at {a}" in text, text
         assert "Traceback" not in text, text
     assert waited < 30, waited
+
+
+# ---- the compose profile mc ----------------------------------------------------------------------
+
+
+@dataclass
+class Mc:
+    project: str
+    run: Callable[..., Any]  # compose with the profile mc, in the project
+    address: str  # the scheduler, as the host reaches it
+
+
+@pytest.fixture
+def mc_cluster(compose: list[str], image: str) -> Iterator[Mc]:  # noqa: F811
+    """compose.yaml's profile mc, up with two workers."""
+    project = f"tltrack-test-{os.getpid()}-{secrets.token_hex(3)}"  # test_compose reaps these
+    env = {**_clean_env(), "TLTRACK_MC_BIND": "127.0.0.1", "TLTRACK_MC_PORT": "0"}
+
+    def run(*args: str, timeout: float = 300, check: bool = True) -> Any:
+        cmd = [*compose, "-f", str(ROOT / "compose.yaml"), "-p", project, "--profile", "mc"]
+        return _run([*cmd, *args], env=env, timeout=timeout, check=check)
+
+    try:
+        run("up", "-d", "--scale", "mc-worker=2", "mc-scheduler", "mc-worker")
+        port = run("port", "mc-scheduler", "8786").stdout.strip().rsplit(":", 1)[-1]
+        yield Mc(project, run, f"tcp://127.0.0.1:{int(port)}")
+    finally:
+        print(run("logs", "--no-color", "--tail", "30", check=False).stdout[-6000:])
+        down = run("down", "-v", "--remove-orphans", "--timeout", "10", check=False)
+        left = _remove_leftovers(project)
+        assert down.returncode == 0 and not left, (down.stderr[-3000:], left)
+
+
+@pytest.mark.docker
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_cluster, tmp_path):
+    """A small `tltrack reproduce --table2-pf-only` against the profile's scheduler, from a
+    client container on the cluster's network and from the host through the loopback port;
+    both equal the local pool's results."""
+    from distributed import Client
+    from tltrack import reproduce as rep
+
+    run, address = mc_cluster.run, mc_cluster.address
+    with Client(address, timeout=60, set_as_default=False) as c:
+        c.wait_for_workers(2, timeout=240)
+        workers = c.scheduler_info(n_workers=-1)["workers"]
+    assert len(workers) == 2, workers
+    # the workers are on the internal network `mc` only: nothing outside the host reaches them
+    for cid in run("ps", "-q", "mc-worker").stdout.split():
+        nets = _run(["docker", "inspect", "-f", "{{json .NetworkSettings.Networks}}", cid]).stdout
+        assert list(json.loads(nets)) == [f"{mc_cluster.project}_mc"], nets
+
+    runs = 4
+    script = (
+        f"tltrack reproduce --runs {runs} --table2-pf-only --out /data/r >&2 && python -c "
+        "\"import json, glob; print(json.dumps({p.split('/')[-2]: json.load(open(p))['filters'] "
+        "for p in glob.glob('/data/r/*/results.json')}))\""
+    )
+    t0 = time.monotonic()
+    inside = run("run", "--rm", "--no-deps", "mc-client", "sh", "-c", script)
+    print(f"client in a container: {time.monotonic() - t0:.1f} s")
+    assert "batches go to the Dask cluster at tcp://mc-scheduler:8786" in inside.stderr
+    from_container = json.loads(inside.stdout.strip().splitlines()[-1])
+
+    t0 = time.monotonic()
+    host = subprocess.run(
+        [
+            *[str(BIN / "tltrack"), "reproduce", "--runs", str(runs), "--table2-pf-only"],
+            *["--scheduler", address, "--out", str(tmp_path / "host")],
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    print(f"client on the host: {time.monotonic() - t0:.1f} s")
+    assert host.returncode == 0, host.stderr[-4000:]
+
+    local = rep.run_all(
+        rep.table2_pf_jobs(rep.base_config("paper", "fixed", runs, 0)), tmp_path / "local"
+    )
+    assert set(from_container) == set(local) == {f"s2_n{n}" for n in rep.PARTICLES}
+    for label, doc in local.items():
+        same(from_container[label], doc["filters"])
+        on_host = json.loads((tmp_path / "host" / label / "results.json").read_text())
+        same(on_host["filters"], doc["filters"])

@@ -241,7 +241,7 @@ def pool(
 
 
 def probe(scheduler: str, timeout: float) -> None:
-    """Open a connection to ``scheduler`` and shake hands, within ``timeout`` s, or raise.
+    """Connect to ``scheduler`` and ask who it is, within ``timeout`` s, or raise.
 
     Dask's own connect bounds the TCP connection but not the handshake that follows: a port
     that accepts and never speaks would hang the client forever. The probe runs on its own event
@@ -252,16 +252,21 @@ def probe(scheduler: str, timeout: float) -> None:
 
     args = Security().get_connection_args("client")  # tls:// takes its settings from Dask's config
 
-    async def shake() -> None:
+    async def shake() -> dict[str, Any]:
         # Dask's own timeout first, as its message says more (refused, unreachable, ...)
         comm = await asyncio.wait_for(connect(scheduler, timeout=timeout, **args), timeout + 2)
-        await comm.close()
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return dict(await asyncio.wait_for(comm.read(), timeout))
+        finally:
+            await comm.close()
 
     failure: list[BaseException] = []
+    identity: list[dict[str, Any]] = []
 
     def run() -> None:
         try:
-            asyncio.run(shake())
+            identity.append(asyncio.run(shake()))
         except BaseException as err:
             failure.append(err)
 
@@ -269,14 +274,17 @@ def probe(scheduler: str, timeout: float) -> None:
     t.start()
     t.join(timeout + 7)
     if t.is_alive():
-        raise TimeoutError(f"no handshake within {timeout:.0f} s")
+        raise TimeoutError(f"no answer within {timeout:.0f} s")
     if failure:
         err = failure[0]
         raise (
-            TimeoutError(f"no handshake within {timeout:.0f} s")
+            TimeoutError(f"no answer within {timeout:.0f} s")
             if isinstance(err, asyncio.TimeoutError)
             else err
         )
+    kind = identity[0].get("type")
+    if kind != "Scheduler":
+        raise ValueError(f"it answers as a Dask {kind}, not a Scheduler")
 
 
 @contextmanager
