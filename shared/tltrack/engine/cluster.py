@@ -160,13 +160,15 @@ class DaskPool(Executor):
             rpc = self.client.scheduler
             if rpc is None:
                 raise ConnectionError("the client is closed")
-            info = self.client.sync(rpc.identity, callback_timeout=self._ping_timeout)
+            info = self.client.sync(
+                rpc.identity, n_workers=0, callback_timeout=self._ping_timeout
+            )  # n_workers=0: the count only, not every worker's description
         except Exception as err:
             raise SchedulerError(
                 f"the Dask scheduler at {self.address} did not answer within "
                 f"{self._ping_timeout:.0f} s ({type(err).__name__}: {err})"
             ) from err
-        return int(info.get("n_workers", len(info.get("workers", {}))))
+        return int(info["n_workers"])
 
     def wait_for_workers(self, timeout: float, say: Callable[[str], None] | None = None) -> int:
         """Block until the scheduler has a worker; how many it has. Fails after ``timeout`` s."""
@@ -186,12 +188,13 @@ class DaskPool(Executor):
         return n
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        """Stop the watchdog and drop the batches still out (the client itself is closed by
-        :func:`pool`, which opened it)."""
+        """Stop the watchdog; wait for the batches still out, or drop them (the client itself is
+        closed by :func:`pool`, which opened it, and which does not wait)."""
         self._stop.set()
-        if cancel_futures or not wait:
+        drop = cancel_futures or not wait
+        if drop:
             self._fail(SchedulerError("the sweep was stopped"))
-        self._executor.shutdown(wait=False)
+        self._executor.shutdown(wait=not drop)
 
 
 def _explain(exc: BaseException, address: str) -> BaseException:
