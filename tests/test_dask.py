@@ -446,6 +446,7 @@ def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_clust
     from tltrack import reproduce as rep
 
     run, address = mc_cluster.run, mc_cluster.address
+    cluster.probe(address, 60)  # Docker publishes the port before the scheduler listens
     with Client(address, timeout=60, set_as_default=False) as c:
         c.wait_for_workers(2, timeout=240)
         workers = c.scheduler_info(n_workers=-1)["workers"]

@@ -248,7 +248,8 @@ def probe(scheduler: str, timeout: float) -> None:
 
     Dask's own connect bounds the TCP connection but not the handshake that follows: a port
     that accepts and never speaks would hang the client forever. The probe runs on its own event
-    loop in a thread, and is cancelled cleanly when its time is up.
+    loop in a thread, and is cancelled cleanly when its time is up. A connection reset (a port
+    that Docker publishes before the scheduler behind it listens) is tried again meanwhile.
     """
     from distributed.comm import connect
     from distributed.security import Security
@@ -256,13 +257,21 @@ def probe(scheduler: str, timeout: float) -> None:
     args = Security().get_connection_args("client")  # tls:// takes its settings from Dask's config
 
     async def shake() -> dict[str, Any]:
-        # Dask's own timeout first, as its message says more (refused, unreachable, ...)
-        comm = await asyncio.wait_for(connect(scheduler, timeout=timeout, **args), timeout + 2)
-        try:
-            await comm.write({"op": "identity", "reply": True})
-            return dict(await asyncio.wait_for(comm.read(), timeout))
-        finally:
-            await comm.close()
+        deadline = time.monotonic() + timeout
+        while True:
+            left = max(deadline - time.monotonic(), 0.1)
+            try:
+                # Dask's own timeout first, as its message says more (refused, unreachable, ...)
+                comm = await asyncio.wait_for(connect(scheduler, timeout=left, **args), left + 2)
+                try:
+                    await comm.write({"op": "identity", "reply": True})
+                    return dict(await asyncio.wait_for(comm.read(), left))
+                finally:
+                    await comm.close()
+            except OSError:  # also a reset: a published port whose scheduler is still starting
+                if time.monotonic() + 0.5 > deadline:
+                    raise
+                await asyncio.sleep(0.5)
 
     failure: list[BaseException] = []
     identity: list[dict[str, Any]] = []
@@ -275,7 +284,7 @@ def probe(scheduler: str, timeout: float) -> None:
 
     t = threading.Thread(target=run, name="tltrack-dask-probe", daemon=True)
     t.start()
-    t.join(timeout + 7)
+    t.join(2 * timeout + 7)
     if t.is_alive():
         raise TimeoutError(f"no answer within {timeout:.0f} s")
     if failure:
