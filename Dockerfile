@@ -39,7 +39,8 @@ ENV VIRTUAL_ENV=/opt/venv \
     PIP_NO_CACHE_DIR=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     MPLBACKEND=Agg \
-    MPLCONFIGDIR=/tmp/matplotlib
+    MPLCONFIGDIR=/tmp/matplotlib \
+    NUMBA_CACHE_DIR=/opt/numba-cache
 
 # --no-log-init: no sparse lastlog/faillog entry for a high uid in the layer.
 RUN groupadd --gid "${GID}" tltrack \
@@ -62,5 +63,9 @@ RUN pip install --no-index --no-deps /tmp/app/*.whl \
 # /data holds the scorer's SQLite database; mount a named volume there (a new named volume
 # inherits the owner tltrack from this directory).
 WORKDIR /data
+# numba uses a cache directory only if the user that loads it may write there (it ignores the
+# kernels compiled above otherwise, and compiles them again at every start): give it to tltrack.
+# A host of another CPU model compiles its own kernels once into it (README, Dask cluster).
+RUN chown -R "${UID}:${GID}" /opt/numba-cache
 USER ${UID}:${GID}
 CMD ["tltrack", "--help"]

@@ -463,7 +463,8 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
         )
         return service_env(proc.stdout)
 
-    env = config()
+    # the profile mc (a Dask cluster) has no Zenoh identity; docker-compose 1.29 lists it anyway
+    env = {s: e for s, e in config().items() if not s.startswith("mc-")}
     assert env.keys() == {"router", *COMPOSE_IDENTITY}, env.keys()
     for service, user in COMPOSE_IDENTITY.items():
         assert env[service].get("TLTRACK_ZENOH_USERNAME") == user, (service, env[service])

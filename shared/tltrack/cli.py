@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from concurrent.futures import Executor
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, get_args
 
@@ -33,6 +36,42 @@ def progress_bar(total: int, what: str) -> Progress:
         disable=not console.is_terminal and total < 2,
     )
     return p
+
+
+#: ``--scheduler``, shared by the commands that run the Monte-Carlo engine.
+Scheduler = Annotated[
+    str | None,
+    typer.Option(
+        envvar="TLTRACK_SCHEDULER",
+        help="run the batches on the Dask cluster of this scheduler (tcp://HOST:PORT) instead of "
+        "the local process pool",
+    ),
+]
+#: ``--workers`` and ``--batch-size``, likewise.
+Workers = Annotated[
+    int | None, typer.Option(help="worker processes of the local pool (default: all cores)")
+]
+BatchSize = Annotated[int | None, typer.Option(help="runs per vectorised batch")]
+
+
+@contextmanager
+def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor | None]:
+    """The Dask cluster's executor for ``--scheduler``, or None for the local pool; exits with
+    the reason when the two options clash or the cluster cannot be used."""
+    from tltrack.engine import cluster
+
+    address = cluster.address(scheduler)
+    if reason := cluster.refuse_workers(address, workers):
+        console.print(f"[red]error:[/red] {reason}")
+        raise typer.Exit(2)
+    try:
+        with cluster.pool(address, say=console.print) as ex:
+            if ex is not None:
+                console.print(f"batches go to the Dask cluster at {address}")
+            yield ex
+    except cluster.SchedulerError as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(1) from None
 
 
 def build_config(config: Path | None, **overrides: Any) -> Config:
@@ -118,10 +157,9 @@ def experiment(
             "--recovery/--no-recovery", help="reinitialise lost particle filters (default: off)"
         ),
     ] = None,
-    workers: Annotated[
-        int | None, typer.Option(help="worker processes (default: all cores)")
-    ] = None,
-    batch_size: Annotated[int | None, typer.Option(help="runs per vectorised batch")] = None,
+    workers: Workers = None,
+    batch_size: BatchSize = None,
+    scheduler: Scheduler = None,
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
     from tltrack.engine.montecarlo import check_filters
@@ -154,7 +192,7 @@ def experiment(
     except ValueError as err:
         console.print(f"[red]error:[/red] --filters: {err}")
         raise typer.Exit(2) from None
-    with progress_bar(cfg.runs, "runs") as bar:
+    with engine_pool(scheduler, workers) as executor, progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
         doc = run_and_save(
             cfg,
@@ -163,6 +201,7 @@ def experiment(
             workers=workers,
             batch_size=batch_size,
             progress=lambda n: bar.advance(task, n),
+            executor=executor,
         )
     _print_table(doc)
     console.print(f"wrote {out / 'results.json'}, {out / 'rmse.png'}, {out / 'trajectory.png'}")
@@ -217,10 +256,12 @@ def reproduce(
     preset: Annotated[str, typer.Option(help="paper or arasaratnam-haykin")] = "paper",
     truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "fixed",
     seed: Annotated[int, typer.Option(help="master seed")] = 0,
-    workers: Annotated[int | None, typer.Option(help="worker processes")] = None,
+    workers: Workers = None,
     table2_pf_only: Annotated[
         bool, typer.Option(help="only Table 2's particle-filter rows (the 10,000-run benchmark)")
     ] = False,
+    batch_size: BatchSize = None,
+    scheduler: Scheduler = None,
 ) -> None:
     """Regenerate every figure and table of the paper's Simulation Results, with report.md."""
     from tltrack import reproduce as rep
@@ -231,10 +272,15 @@ def reproduce(
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
     todo = rep.table2_pf_jobs(base) if table2_pf_only else rep.jobs(base) + rep.loss_jobs(base)
-    with progress_bar(runs, "reproduce") as bar:
+    with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
         tasks = {j.label: bar.add_task(j.label, total=runs) for j in todo}
         docs = rep.run_all(
-            todo, out, workers=workers, progress=lambda label, n: bar.advance(tasks[label], n)
+            todo,
+            out,
+            workers=workers,
+            batch_size=batch_size,
+            executor=executor,
+            progress=lambda label, n: bar.advance(tasks[label], n),
         )
     made = rep.table2_pf_report(docs, out) if table2_pf_only else rep.report(docs, out)
     console.print(f"wrote {made}")
@@ -406,8 +452,9 @@ def study(
     filters: Annotated[
         str, typer.Option(help="filters (study realizations)")
     ] = "pf,tl-pf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5",
-    workers: Annotated[int | None, typer.Option(help="worker processes")] = None,
-    batch_size: Annotated[int | None, typer.Option(help="runs per vectorised batch")] = None,
+    workers: Workers = None,
+    batch_size: BatchSize = None,
+    scheduler: Scheduler = None,
 ) -> None:
     """A study beyond the paper: a markdown report, its numbers (JSON) and a figure."""
     from tltrack import studies
@@ -431,9 +478,9 @@ def study(
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
     total = runs * (realizations if name == "realizations" else 1)
-    with progress_bar(total, name) as bar:
+    with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=None)
-        runner = studies.Runner(lambda n: bar.advance(task, n), workers, batch_size)
+        runner = studies.Runner(lambda n: bar.advance(task, n), workers, batch_size, executor)
         try:
             if name == "realizations":
                 names = [f.strip() for f in filters.split(",") if f.strip()]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from pathlib import Path
 from typing import Any
 
@@ -22,9 +23,12 @@ def run_and_save(
     workers: int | None = None,
     batch_size: int | None = None,
     progress: Callable[[int], None] | None = None,
+    executor: Executor | None = None,
 ) -> dict[str, Any]:
     """Run, then write ``out/results.json``, ``out/rmse.png`` and ``out/trajectory.png``."""
-    res = run_experiment(cfg, filters, workers=workers, batch_size=batch_size, progress=progress)
+    res = run_experiment(
+        cfg, filters, workers=workers, batch_size=batch_size, progress=progress, executor=executor
+    )
     doc = results.assemble(cfg, res)
     results.write(doc, out)
     draw(doc, out)

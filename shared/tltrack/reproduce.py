@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Iterable
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -145,8 +146,11 @@ def run_all(
     *,
     workers: int | None = None,
     progress: Callable[[str, int], None] | None = None,
+    batch_size: int | None = None,
+    executor: Executor | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """Run every job (``progress(label, runs_done)``), saving each one's results.json.
+    """Run every job (``progress(label, runs_done)``), saving each one's results.json; the
+    batches go to ``executor`` (a Dask cluster's) when given, else to a local pool.
 
     A job's ``wall_s`` is that of its sweep (``sweep`` lists the jobs that shared it).
     """
@@ -163,7 +167,14 @@ def run_all(
                 if progress:
                     progress(label, n)
 
-        swept = run_sweep(cfgs, names, workers=workers, progress=advance)
+        swept = run_sweep(
+            cfgs,
+            names,
+            workers=workers,
+            batch_size=batch_size,
+            executor=executor,
+            progress=advance,
+        )
         wall = time.perf_counter() - t0
         by_intensity = {c.primary_intensity: r for c, r in zip(cfgs, swept, strict=True)}
         for job in group:

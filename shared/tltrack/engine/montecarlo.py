@@ -16,7 +16,8 @@ import copy
 import os
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -358,6 +359,7 @@ def run_experiment(
     workers: int | None = None,
     progress: Callable[[int], None] | None = None,
     time_steps: bool = True,
+    executor: Executor | None = None,
 ) -> dict[str, FilterResult]:
     """Run ``cfg.runs`` runs of every filter; ``progress(n)`` hears of each batch of n runs."""
     return run_sweep(
@@ -367,6 +369,7 @@ def run_experiment(
         workers=workers,
         progress=progress,
         time_steps=time_steps,
+        executor=executor,
     )[0]
 
 
@@ -378,10 +381,18 @@ def run_sweep(
     workers: int | None = None,
     progress: Callable[[int], None] | None = None,
     time_steps: bool = True,
+    executor: Executor | None = None,
 ) -> list[dict[str, FilterResult]]:
     """:func:`run_experiment` for each of ``cfgs`` (they may differ only in the primary's noise
-    intensity), running the sources once for all of them; see :func:`run_sweep_batch`."""
+    intensity), running the sources once for all of them; see :func:`run_sweep_batch`.
+
+    Batches run on a local process pool of ``workers`` processes, or on ``executor`` (a Dask
+    cluster's, see :mod:`tltrack.engine.cluster`), never both. ``progress`` hears of each batch as
+    it completes; results are merged in batch order, so they do not depend on which finished first.
+    """
     check_sweep(cfgs)
+    if executor is not None and workers is not None:
+        raise ValueError("give workers (the local pool's size) or an executor, not both")
     cfg = cfgs[0]
     check_filters(cfg, names)
     bs = batch_size or default_batch_size(cfg, names)
@@ -389,25 +400,39 @@ def run_sweep(
     workers = max(1, min(workers or os.cpu_count() or 1, len(batches)))
     totals: list[dict[str, FilterStats]] = [{} for _ in cfgs]
 
-    def absorb(stats: list[dict[str, FilterStats]], n: int) -> None:
+    def absorb(stats: list[dict[str, FilterStats]]) -> None:
         for total, part in zip(totals, stats, strict=True):
             for name, s in part.items():
                 if name in total:
                     total[name].merge(s)
                 else:
                     total[name] = s
-        if progress:
-            progress(n)
 
     warm_up()  # workers then load compiled kernels from the cache instead of compiling them
-    if workers == 1:
+    if executor is None and workers == 1:
         for b in batches:
-            absorb(run_sweep_batch(cfgs, names, b), len(b))
+            absorb(run_sweep_batch(cfgs, names, b))
+            if progress:
+                progress(len(b))
     else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [(pool.submit(run_sweep_batch, cfgs, names, b), len(b)) for b in batches]
-            for fut, n in futures:
-                absorb(fut.result(), n)
+        with nullcontext(executor) if executor else ProcessPoolExecutor(workers) as pool:
+            futures = {
+                pool.submit(run_sweep_batch, cfgs, names, b): i for i, b in enumerate(batches)
+            }
+            done: dict[int, list[dict[str, FilterStats]]] = {}
+            merged = 0
+            try:
+                for fut in as_completed(futures):
+                    i = futures[fut]
+                    done[i] = fut.result()
+                    if progress:
+                        progress(len(batches[i]))
+                    while merged in done:  # in batch order: float sums in a fixed order
+                        absorb(done.pop(merged))
+                        merged += 1
+            finally:
+                for fut in futures:
+                    fut.cancel()
     if time_steps:
         timed = run_sweep_batch(cfgs, names, [0], timing=True)
         for total, part in zip(totals, timed, strict=True):

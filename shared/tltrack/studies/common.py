@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.montecarlo import FilterResult, run_experiment, run_sweep
+from tltrack.engine.montecarlo import FilterResult, run_sweep
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
 from tltrack.engine.truth_file import experiment_config
@@ -35,16 +36,20 @@ class Runner:
     progress: Callable[[int], None] | None = None
     workers: int | None = None
     batch_size: int | None = None
+    executor: Executor | None = None  #: a Dask cluster's (tltrack.engine.cluster), or local
 
     def run(self, cfg: Config, names: Sequence[str]) -> Results:
-        return run_experiment(
-            cfg, names, progress=self.progress, workers=self.workers, batch_size=self.batch_size
-        )
+        return self.sweep([cfg], names)[0]
 
     def sweep(self, cfgs: Sequence[Config], names: Sequence[str]) -> list[Results]:
         """Configurations differing only in the primary's intensity, the sources run once."""
         return run_sweep(
-            cfgs, names, progress=self.progress, workers=self.workers, batch_size=self.batch_size
+            cfgs,
+            names,
+            progress=self.progress,
+            workers=self.workers,
+            batch_size=self.batch_size,
+            executor=self.executor,
         )
 
 

@@ -1,0 +1,85 @@
+"""Dask worker preload: compile (or load) the particle-filter kernels once, when a worker starts.
+
+    dask worker tcp://SCHEDULER:8786 --nthreads 1 --preload tltrack.engine.dask_preload
+
+Dask calls :func:`dask_setup` before the worker registers with its scheduler, so a worker takes
+batches only once its kernels are ready, instead of compiling them inside its first batch (and
+side by side with the other workers of its host).
+
+numba keeps compiled kernels in a cache directory, which must be writable, and which it reuses
+only on the same CPU model. The cache is ``$NUMBA_CACHE_DIR`` when set (it must be writable; the
+worker refuses to start otherwise). When unset, numba's own cache beside the sources serves if
+it is writable (a development install), else a per-user directory under the temporary directory
+(an image whose packages belong to root). A worker started without this preload gives the same
+results; it only compiles at its first batch.
+
+The nanny sets the OpenMP, MKL and OpenBLAS thread counts to the worker's thread count, but not
+``NUMBA_NUM_THREADS``; the kernels run on one thread each (no ``parallel=True``), so one worker
+thread per core (``--nthreads 1`` and ``--nworkers`` = cores) keeps every core busy.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+# under "distributed", so that a worker's log shows it beside Dask's own lines
+log = logging.getLogger("distributed.preloading.tltrack")
+
+
+def cache_dir() -> Path | None:
+    """Where numba should cache the kernels: None for numba's default beside the sources."""
+    if env := os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(env)
+    spec = importlib.util.find_spec("tltrack.filters")
+    roots = list(spec.submodule_search_locations or []) if spec else []
+    if roots and _writable(Path(roots[0]) / "__pycache__"):
+        return None
+    return Path(tempfile.gettempdir()) / f"tltrack-numba-{os.getuid()}"
+
+
+def _writable(path: Path) -> bool:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+    except OSError:
+        return False
+    return True
+
+
+def prepare() -> tuple[Path | None, float]:
+    """Point numba at a writable cache and load or compile every kernel; (cache, seconds)."""
+    where = cache_dir()
+    if where is not None:
+        if not _writable(where):
+            raise RuntimeError(
+                f"NUMBA_CACHE_DIR={where} is not writable: numba could not keep the compiled "
+                "kernels, and every worker would compile them again at every start"
+            )
+        os.environ["NUMBA_CACHE_DIR"] = str(where)
+        import numba.core.config
+
+        numba.core.config.reload_config()  # in case numba was imported before this module
+    t0 = time.perf_counter()
+    importlib.import_module("tltrack.engine.montecarlo")  # what a batch needs: not in batch 1
+    from tltrack.filters.particle import warm_up
+
+    warm_up()
+    return where, time.perf_counter() - t0
+
+
+def dask_setup(worker: Any) -> None:
+    """Dask's preload hook: runs in the worker process before it registers."""
+    where, seconds = prepare()
+    log.info(
+        "tltrack kernels ready in %.1f s (numba cache: %s) on worker %s, pid %d",
+        seconds,
+        where or "beside the sources",
+        getattr(worker, "address", "?"),
+        os.getpid(),
+    )
