@@ -23,7 +23,8 @@ from tltrack.engine.scenario import simulate
 from tltrack.engine.streams import streams
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import fastmath as kernels
-from tltrack.filters.particle import ParticleFilter, gaussian_loglik
+from tltrack.filters.likelihood import gaussian_loglik
+from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices, systematic_walk
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models import ConstantVelocity, CoordinatedTurn, Observation, RangeBearing

@@ -34,23 +34,11 @@ from numpy.typing import NDArray
 from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import gaussians, moments, propagation, resample
+from tltrack.filters.likelihood import Likelihood
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
-
-
-def gaussian_loglik(obs: Observation, x: Array) -> Array:
-    """log N(obs.mean; h(x), obs.cov) up to a per-run constant, (B, N) (eq. TL_tr_likelihood_2).
-
-    The generic path, for any sensor; a sensor with compiled kernels (:mod:`~.fastpath`) computes
-    the same quantity there.
-    """
-    d = obs.sensor.residual(obs.mean[:, :, None], obs.sensor.h(x))  # (n_z, B, N)
-    rho = -0.5 * np.einsum("ibn,bij,jbn->bn", d, np.linalg.inv(obs.cov), d)
-    if obs.mask is not None:
-        rho = np.where(obs.mask[:, None], rho, 0.0)
-    return rho
 
 
 _f64 = fastpath.f64
@@ -88,7 +76,7 @@ class ParticleFilter:
         self._r = L.shape[1]
         self._propagate = fastpath.propagator(model, self.N)
         self._U1 = np.empty((1, gaussians.uniforms_per_run(self._r, self.N)))  # one run's
-        self._sensor_kernels: dict[type, fastpath.SensorKernels | None] = {}
+        self._likelihood = Likelihood(B)
         self._logw = np.empty((B, self.N))
         self._u = np.empty(B)  # this step's systematic offsets
         self._anc = np.empty((B, self.N + 1), dtype=np.int64)  # ancestors (+ a scratch column)
@@ -159,41 +147,9 @@ class ParticleFilter:
             self._propagate(src, anc, U, out, b)
         self.x = out
 
-    def _kernels(self, sensor: MeasurementModel) -> fastpath.SensorKernels | None:
-        if type(sensor) not in self._sensor_kernels:
-            self._sensor_kernels[type(sensor)] = fastpath.sensor_kernels(sensor, self.batch)
-        return self._sensor_kernels[type(sensor)]
-
-    def _split(
-        self, observations: Sequence[Observation]
-    ) -> tuple[tuple[fastpath.SensorKernels, list[Observation]] | None, list[Observation]]:
-        """The statements one compiled kernel takes (the first sensor type that has one, in one
-        layout), and the others (generic path)."""
-        if not (self._x.dtype == np.float64 and self._x.flags.c_contiguous):
-            return None, list(observations)
-        fast: list[Observation] = []
-        others: list[Observation] = []
-        kernels = None
-        for o in observations:
-            if not fast and (k := self._kernels(o.sensor)) is not None:
-                kernels = k
-                fast.append(o)
-            elif fast and type(o.sensor) is type(fast[0].sensor) and _same_layout(o, fast[0]):
-                fast.append(o)
-            else:
-                others.append(o)
-        return (None if kernels is None else (kernels, fast)), others
-
     def _loglik_into(self, observations: Sequence[Observation], logw: Array) -> None:
         """Write the sum of every observation's log-likelihood into ``logw`` (B, N)."""
-        x = self._cloud()
-        fast, others = self._split(observations)
-        if fast is not None:
-            fast[0].loglik(x, fast[1], logw)
-        else:
-            logw[...] = 0.0
-        for o in others:
-            logw += gaussian_loglik(o, x)
+        self._likelihood.into(self._cloud(), observations, logw)
 
     def log_weights(self, observations: Sequence[Observation]) -> Array:
         """Unnormalised log-weights (B, N): the sum of every observation's log-likelihood."""
@@ -216,7 +172,7 @@ class ParticleFilter:
         mean = np.empty((B, n))
         cov = np.empty((B, n, n))
         ok = np.empty(B, dtype=np.bool_)
-        fast, others = self._split(observations)
+        fast, others = self._likelihood.split(observations, x)
         if fast is not None and not others:  # likelihood and resampling fused, run by run
             kernels, obs = fast
             good = kernels.update(x, obs, u, self._anc, mean, cov, ok, self._logw[0])
@@ -256,7 +212,7 @@ class ParticleFilter:
 
         Angles' means are circular, and their deviations wrapped, as tracks cross the +-pi cut.
         """
-        kernels = self._kernels(sensor)
+        kernels = self._likelihood.kernels(sensor)
         x = self._cloud()
         if kernels is not None:
             eta, cov = kernels.predicted_observation(_f64(x), sensor)
@@ -266,10 +222,6 @@ class ParticleFilter:
         d = sensor.residual(Z, eta[:, :, None])
         cov = np.einsum("ibn,jbn->bij", d, d) / self.N + R
         return Observation(sensor, eta, cov)
-
-
-def _same_layout(a: Observation, b: Observation) -> bool:
-    return bool(getattr(a.sensor, "layout", None) == getattr(b.sensor, "layout", None))
 
 
 def warm_up() -> None:

@@ -12,7 +12,7 @@ from tltrack.filters.resampling import systematic_walk
 
 
 @njit(**FMA)
-def _max(v: np.ndarray) -> float:
+def largest(v: np.ndarray) -> float:
     """Largest non-NaN entry, with four independent chains so the loop is not latency-bound."""
     m0 = m1 = m2 = m3 = -np.inf
     n = v.shape[0]
@@ -42,7 +42,7 @@ def resample_run(
 ) -> bool:
     """Run b of :func:`resample`, from its log-weights w (overwritten); cnt (N,) is scratch."""
     N = w.shape[0]
-    m = _max(w)
+    m = largest(w)
     for i in range(N):
         w[i] = exp(w[i] - m)
     if not systematic_walk(w, u, anc):
