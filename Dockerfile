@@ -58,7 +58,7 @@ COPY build/wheels/app/ /tmp/app/
 # trackers start in seconds instead of compiling at every start.
 RUN pip install --no-index --no-deps /tmp/app/*.whl \
  && rm -rf /tmp/app \
- && python -c "import tltrack.services; from tltrack.filters.particle import warm_up; warm_up()"
+ && python -c "import tltrack.services; from tltrack.filters.warm import warm_up; warm_up()"
 
 # /data holds the scorer's SQLite database; mount a named volume there (a new named volume
 # inherits the owner tltrack from this directory).

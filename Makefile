@@ -27,7 +27,7 @@ check: $(STAMP) lint warm
 
 ## Compile the particle-filter kernels once, so parallel test processes load them from the cache.
 warm: $(STAMP)
-	$(BIN)/python -c "from tltrack.filters.particle import warm_up; warm_up()"
+	$(BIN)/python -c "from tltrack.filters.warm import warm_up; warm_up()"
 
 lint: $(STAMP)
 	$(BIN)/ruff check shared services tests examples benchmarks scripts

@@ -12,14 +12,13 @@ import logging
 import time
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
-from tltrack.config import Config
+from tltrack.config import PARTICLE_KINDS, Config, FilterKind
 from tltrack.filters.decision import NotComparableError
-from tltrack.filters.particle import warm_up
+from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, estimate_message
@@ -37,7 +36,7 @@ class Settings(BaseSettings):
         env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME, env_ignore_empty=True
     )
 
-    filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    filter: FilterKind = Field("rpf", description="filter kind")
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
@@ -197,7 +196,7 @@ class PrimaryTracker:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    if settings.filter == "pf":
+    if settings.filter in PARTICLE_KINDS:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)

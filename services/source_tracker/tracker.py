@@ -6,13 +6,12 @@ import logging
 import time
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
-from tltrack.config import Config
-from tltrack.filters.particle import warm_up
+from tltrack.config import PARTICLE_KINDS, Config, FilterKind
+from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import (
@@ -36,7 +35,7 @@ class Settings(BaseSettings):
     )
 
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
-    filter: Literal["pf", "ukf", "ckf3", "ckf5"] = Field("pf", description="filter kind")
+    filter: FilterKind = Field("rpf", description="filter kind")
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
     gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
@@ -133,7 +132,7 @@ class SourceTracker:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    if settings.filter == "pf":
+    if settings.filter in PARTICLE_KINDS:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))

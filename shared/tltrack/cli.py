@@ -369,7 +369,7 @@ def _run_demo(
     host: str,
 ) -> dict[str, Any]:
     """One episode on a fresh stack; the scorer's summary, with ``access_control`` set."""
-    from tltrack.filters.particle import warm_up
+    from tltrack.filters.warm import warm_up
     from tltrack.summary import print_summary
 
     endpoint = f"tcp/127.0.0.1:{d.free_port()}"

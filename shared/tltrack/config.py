@@ -25,7 +25,9 @@ Preset = Literal["paper", "arasaratnam-haykin"]
 TruthMode = Literal["fixed", "random", "noise-free", "file"]
 SourceFault = Literal["none", "bias", "diverged", "stale"]
 #: the posterior approximations a filter may use (tltrack.engine.registry builds them)
-FilterKind = Literal["pf", "ukf", "ckf3", "ckf5"]
+FilterKind = Literal["pf", "rpf", "ukf", "ckf3", "ckf5"]
+#: the kinds that are particle filters (they take N, a random stream, fusion and recovery)
+PARTICLE_KINDS = ("pf", "rpf")
 #: the kinds of sensor an operator may have (tltrack.models.from_config builds them)
 SensorKind = Literal["range-bearing", "bearing", "position", "range-bearing-doppler"]
 #: each kind's noise parameters and their defaults (None: the config's flat field of that name)

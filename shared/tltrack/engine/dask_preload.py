@@ -67,7 +67,7 @@ def prepare() -> tuple[Path | None, float]:
         numba.core.config.reload_config()  # in case numba was imported before this module
     t0 = time.perf_counter()
     importlib.import_module("tltrack.engine.montecarlo")  # what a batch needs: not in batch 1
-    from tltrack.filters.particle import warm_up
+    from tltrack.filters.warm import warm_up
 
     warm_up()
     return where, time.perf_counter() - t0

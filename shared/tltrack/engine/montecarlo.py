@@ -23,14 +23,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import Config
+from tltrack.config import PARTICLE_KINDS, Config
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_name
 from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy, position_fix
-from tltrack.filters.particle import warm_up
 from tltrack.filters.transfer import Primary, Source
+from tltrack.filters.warm import warm_up
 from tltrack.models.base import Layout, MotionModel
 from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 from tltrack.models.observation import Observation
@@ -347,7 +347,7 @@ def default_batch_size(cfg: Config, names: Sequence[str]) -> int:
     configurations (8 I_p of reproduce: ~0.1 GB a worker), while a batch cut to fit would leave
     the sigma-point filters stepping 3 runs at a time (measured 2.4x slower).
     """
-    pf_count = sum(1 for s in expand(names, cfg) if s.kind == "pf") or 1
+    pf_count = sum(1 for s in expand(names, cfg) if s.kind in PARTICLE_KINDS) or 1
     return int(np.clip(400_000 // (cfg.particles * pf_count), 1, 64))
 
 

@@ -1,6 +1,7 @@
 """Filter names, as the CLI and the services spell them, and how to build each one.
 
-A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, ``ukf``, ``ckf3``,
+A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, the paper's bootstrap
+SIR; ``rpf``, the auxiliary particle filter that keeps the track, docs/rpf.md; ``ukf``, ``ckf3``,
 ``ckf5``) and the role is how it is fed:
 
 - no prefix: the isolated primary, its own measurement only;
@@ -22,8 +23,9 @@ from typing import Literal, get_args
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import Config, FilterKind
+from tltrack.config import PARTICLE_KINDS, Config, FilterKind
 from tltrack.engine.streams import streams
+from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.base import Filter
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.recovery import Recovery
@@ -60,7 +62,7 @@ def parse(name: str) -> FilterSpec:
         if prefix not in _PREFIX:
             raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
         role, kind = _PREFIX[prefix], rest
-    if kind not in KINDS or (role == "fusion" and kind != "pf"):
+    if kind not in KINDS or (role == "fusion" and kind not in PARTICLE_KINDS):
         raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
     return FilterSpec(name, kind, role)
 
@@ -82,7 +84,7 @@ def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
 
 def recovery(spec: FilterSpec, cfg: Config) -> Recovery | None:
     """The lost-track recovery of a particle filter, when the config asks for it."""
-    return Recovery(np.diag(cfg.P0_diag)) if cfg.recovery and spec.kind == "pf" else None
+    return Recovery(np.diag(cfg.P0_diag)) if cfg.recovery and spec.kind in PARTICLE_KINDS else None
 
 
 def build(
@@ -95,9 +97,10 @@ def build(
 ) -> Filter:
     """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0)."""
     P0 = np.diag(cfg.P0_diag)
-    if spec.kind == "pf":
+    if spec.kind in PARTICLE_KINDS:
         rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id))
-        return ParticleFilter(model, x0_hat, P0, cfg.particles, rngs)
+        particles = ParticleFilter if spec.kind == "pf" else AuxiliaryParticleFilter
+        return particles(model, x0_hat, P0, cfg.particles, rngs)
     n = model.n
     rule = {
         "ukf": lambda: unscented(n, cfg.kappa),

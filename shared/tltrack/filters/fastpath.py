@@ -16,7 +16,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.filters.kernels import propagation, range_bearing
+from tltrack.filters.kernels import auxiliary, propagation, range_bearing
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.coordinated_turn import CoordinatedTurn
@@ -36,10 +36,13 @@ def f64(a: Array) -> Array:
 
 class Propagator(Protocol):
     """Propagates run ``b``: out[:, b, i] = f(src[:, b, anc[b, i]]) + Q_sqrt eps, eps made from
-    that run's uniforms ``U`` (1, uniforms_per_run(r, N))."""
+    that run's uniforms ``U`` (1, uniforms_per_run(r, N)); and the transition's mean alone."""
 
     def __call__(self, src: Array, anc: NDArray[np.int64], U: Array, out: Array, b: int) -> None:
         """Propagate run b."""
+
+    def mean(self, x: Array, out: Array) -> None:
+        """out = f(x) for clouds (n_x, B, N), every run."""
 
 
 @dataclass
@@ -61,6 +64,9 @@ class _CT:
             src, anc, U, self.e, self.g, float(m.T), float(m.SMALL), self.L, out, b
         )
 
+    def mean(self, x: Array, out: Array) -> None:
+        auxiliary.ct_mean(x, float(self.model.T), float(self.model.SMALL), out)
+
 
 @dataclass
 class _CV:
@@ -79,6 +85,9 @@ class _CV:
 
     def __call__(self, src: Array, anc: NDArray[np.int64], U: Array, out: Array, b: int) -> None:
         propagation.cv_predict(src, anc, U, self.e, self.g, self.A, self.L, out, b)
+
+    def mean(self, x: Array, out: Array) -> None:
+        out[...] = np.tensordot(self.A, x, axes=1)
 
 
 #: motion model type -> (the Q_sqrt shape its kernel assumes, the propagator's factory)
@@ -121,8 +130,11 @@ class SensorKernels(Protocol):
         into anc, the resampled moments into mean and cov, ok[b] for runs with finite weights;
         returns how many runs are ok. ``row`` (N,) is scratch."""
 
-    def predicted_observation(self, x: Array, sensor: MeasurementModel) -> tuple[Array, Array]:
-        """The sample mean (n_z, B) and covariance (B, n_z, n_z) of h(x) over each run's cloud."""
+    def predicted_observation(
+        self, x: Array, sensor: MeasurementModel, logw: Array | None = None
+    ) -> tuple[Array, Array]:
+        """The sample mean (n_z, B) and covariance (B, n_z, n_z) of h(x) over each run's cloud,
+        weighted by the normalised log-weights ``logw`` (B, N) if given."""
 
 
 @dataclass
@@ -172,13 +184,19 @@ class _RangeBearingKernels:
         packed = self._pack(observations)
         return int(range_bearing.rb_update(x, ix, iy, *packed, u, anc, mean, cov, ok, row))
 
-    def predicted_observation(self, x: Array, sensor: MeasurementModel) -> tuple[Array, Array]:
+    def predicted_observation(
+        self, x: Array, sensor: MeasurementModel, logw: Array | None = None
+    ) -> tuple[Array, Array]:
         assert isinstance(sensor, RangeBearing)
         eta = np.empty((2, self.B))
         cov = np.empty((self.B, 2, 2))
         ix, iy = sensor.layout.pos
-        sx, sy = sensor.position
-        range_bearing.rb_predicted_obs(x, ix, iy, float(sx), float(sy), eta, cov)
+        sx, sy = (float(c) for c in sensor.position)
+        if logw is None:
+            range_bearing.rb_predicted_obs(x, ix, iy, sx, sy, eta, cov)
+        else:
+            w = np.empty(x.shape[2])
+            range_bearing.rb_weighted_predicted_obs(x, ix, iy, sx, sy, logw, eta, cov, w)
         return eta, cov
 
 

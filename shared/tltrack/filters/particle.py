@@ -201,6 +201,13 @@ class ParticleFilter:
             moments.moments(_f64(self._cloud()), mean, cov)
         return Estimate(mean.copy(), cov + self.model.Q)
 
+    def reinitialise(self, b: int, particles: Array) -> None:
+        """Run ``b``'s cloud becomes ``particles`` (n_x, N): a lost-track recovery, after
+        predict (or a fresh start after update)."""
+        x = self._cloud() if self._x.flags.writeable else np.array(self._cloud())
+        x[:, b, :] = particles
+        self.x = x
+
     def adopt(self, other: ParticleFilter, runs: NDArray[np.bool_]) -> None:
         """``other``'s cloud for ``runs`` (the robust TL's rollback to its isolated twin)."""
         x = np.array(self.x)
@@ -222,27 +229,3 @@ class ParticleFilter:
         d = sensor.residual(Z, eta[:, :, None])
         cov = np.einsum("ibn,jbn->bij", d, d) / self.N + R
         return Observation(sensor, eta, cov)
-
-
-def warm_up() -> None:
-    """Load (or, on a cold cache, compile) every fast-path kernel, on a tiny problem.
-
-    Call it in a parent process before starting workers, so they find numba's cache on disk
-    instead of compiling the same kernels side by side.
-    """
-    from tltrack.filters.resampling import systematic_indices
-
-    rngs = [np.random.default_rng(0)]
-    for model, sensor in fastpath.examples():
-        z = Observation.broadcast(sensor, sensor.h(np.full(model.n, 1000.0)), sensor.R(1.0))
-        n = model.n
-        x0 = np.full((n, 1), 1000.0)
-        pf = ParticleFilter(model, x0, np.eye(n), 8, rngs)
-        pf.predict()
-        pf.estimate()
-        pf.predicted_observation(sensor, sensor.R(1.0))
-        pf.update([z, z])
-        pf.estimate()
-        _ = pf.x
-        pf.gaussians()
-    systematic_indices(np.full((1, 4), 0.25), rngs)

@@ -17,28 +17,41 @@ around the previous mean, and, when the sensor's measurement fixes a position
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from tltrack.filters.particle import ParticleFilter
-from tltrack.models.base import PositionFix
+from tltrack.models.base import MotionModel, PositionFix
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
 
 
+class Reinitialisable(Protocol):
+    """A particle filter whose runs a recovery can redraw."""
+
+    model: MotionModel
+    rngs: list[np.random.Generator]
+    N: int
+
+    @property
+    def x(self) -> Array: ...
+
+    def reinitialise(self, b: int, particles: Array) -> None: ...
+
+
 @dataclass
 class Recovery:
-    """Detects and reinitialises lost runs of a :class:`ParticleFilter`; counts them per run."""
+    """Detects and reinitialises lost runs of a particle filter; counts them per run."""
 
     P0: Array
     tail: float = 1e-9
     min_ess: float = 2.0
     count: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
-    def lost(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
+    def lost(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
         d = z.sensor.residual(z.mean[:, :, None], z.sensor.h(pf.x))  # (n_z, B, N)
         nis = np.einsum("ibn,bij,jbn->bn", d, np.linalg.inv(z.cov), d)
         nis = np.where(np.isfinite(nis), nis, np.inf)
@@ -47,7 +60,7 @@ class Recovery:
         ess = w.sum(axis=1) ** 2 / (w**2).sum(axis=1)
         return ~((best <= chi2.ppf(1.0 - self.tail, z.sensor.n_z)) & (ess >= self.min_ess))
 
-    def __call__(self, pf: ParticleFilter, z: Observation) -> NDArray[np.bool_]:
+    def __call__(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
         """Reinitialise the lost runs of ``pf`` around ``z``; returns which were."""
         lost = self.lost(pf, z)
         if self.count.shape[0] != lost.shape[0]:
@@ -57,7 +70,7 @@ class Recovery:
             self._redraw(pf, z, int(b))
         return lost
 
-    def _redraw(self, pf: ParticleFilter, z: Observation, b: int) -> None:
+    def _redraw(self, pf: Reinitialisable, z: Observation, b: int) -> None:
         g = pf.rngs[b]
         finite = np.all(np.isfinite(pf.x[:, b, :]), axis=0)
         mean = pf.x[:, b, finite].mean(axis=1) if finite.any() else np.zeros(pf.x.shape[0])
@@ -68,4 +81,4 @@ class Recovery:
             p = pos[:, 0, None] + np.linalg.cholesky(S[0]) @ g.standard_normal((2, pf.N))
             ix, iy = pf.model.layout.pos
             x[ix], x[iy] = p[0], p[1]
-        pf.x[:, b, :] = x
+        pf.reinitialise(b, x)

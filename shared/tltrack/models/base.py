@@ -97,8 +97,9 @@ class MeasurementModel(Protocol):
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat, with angle components wrapped to (-pi, pi]."""
 
-    def mean(self, Z: Array, axis: int) -> Array:
-        """The sample mean of measurements Z (n_z, ...) over ``axis``; angles' is circular."""
+    def mean(self, Z: Array, axis: int, weights: Array | None = None) -> Array:
+        """The sample mean of measurements Z (n_z, ...) over ``axis``, weighted (weights shaped
+        as one component, summing to 1 along ``axis``) if given; angles' is circular."""
 
     def draw(
         self, x: Array, intensity: float, rng: np.random.Generator, offset: Array | None = None

@@ -51,11 +51,22 @@ class GaussianSensor:
                 d[i] = wrap_angle(d[i])
         return d
 
-    def mean(self, Z: Array, axis: int) -> Array:
-        """Sample mean of measurements along ``axis``; the angles' is circular."""
+    def mean(self, Z: Array, axis: int, weights: Array | None = None) -> Array:
+        """Sample mean of measurements along ``axis``, weighted by ``weights`` (shaped as one
+        component of Z, summing to 1 along ``axis``) if given; the angles' is circular."""
+        if weights is None:
+            return np.stack(
+                [
+                    circular_mean(Z[i], axis - 1) if is_angle else Z[i].mean(axis=axis - 1)
+                    for i, is_angle in enumerate(self.angular)
+                ]
+            )
+        a = axis - 1
         return np.stack(
             [
-                circular_mean(Z[i], axis - 1) if is_angle else Z[i].mean(axis=axis - 1)
+                np.arctan2((weights * np.sin(Z[i])).sum(a), (weights * np.cos(Z[i])).sum(a))
+                if is_angle
+                else (weights * Z[i]).sum(a)
                 for i, is_angle in enumerate(self.angular)
             ]
         )

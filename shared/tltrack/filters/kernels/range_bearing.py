@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, SUM, atan2
+from tltrack.filters.kernels.fastmath import FMA, SUM, atan2, exp
 from tltrack.filters.kernels.resample import resample_run
 
 #: Per-observation constants of one run, see :func:`_rb_constants`.
@@ -195,3 +195,58 @@ def rb_predicted_obs(
         cov[b, 0, 1] = s01 / N
         cov[b, 1, 0] = s01 / N
         cov[b, 1, 1] = s11 / N
+
+
+@njit(**SUM)
+def rb_weighted_predicted_obs(
+    x: np.ndarray,
+    ix: int,
+    iy: int,
+    sx: float,
+    sy: float,
+    logw: np.ndarray,
+    eta: np.ndarray,
+    cov: np.ndarray,
+    w: np.ndarray,
+) -> None:
+    """:func:`rb_predicted_obs` for a weighted cloud (normalised log-weights logw (B, N)): the
+    weighted circular bearing mean, the weighted covariance; w (N,) is scratch."""
+    N = x.shape[2]
+    for b in range(x.shape[1]):
+        total = 0.0
+        for i in range(N):
+            w[i] = exp(logw[b, i])
+            total += w[i]
+        sr = 0.0
+        sc = 0.0
+        ss = 0.0
+        for i in range(N):
+            dx = x[ix, b, i] - sx
+            dy = x[iy, b, i] - sy
+            r = math.sqrt(dx * dx + dy * dy)
+            at_sensor = r == 0.0
+            wi = w[i] / total
+            sr += wi * r
+            sc += wi * (1.0 if at_sensor else dx / r)
+            ss += wi * (0.0 if at_sensor else dy / r)
+        eb = math.atan2(ss, sc)
+        ce = math.cos(eb)
+        se = math.sin(eb)
+        s00 = 0.0
+        s01 = 0.0
+        s11 = 0.0
+        for i in range(N):
+            dx = x[ix, b, i] - sx
+            dy = x[iy, b, i] - sy
+            d0 = math.sqrt(dx * dx + dy * dy) - sr
+            d1 = atan2(dy * ce - dx * se, dx * ce + dy * se)
+            wi = w[i] / total
+            s00 += wi * d0 * d0
+            s01 += wi * d0 * d1
+            s11 += wi * d1 * d1
+        eta[0, b] = sr
+        eta[1, b] = eb
+        cov[b, 0, 0] = s00
+        cov[b, 0, 1] = s01
+        cov[b, 1, 0] = s01
+        cov[b, 1, 1] = s11

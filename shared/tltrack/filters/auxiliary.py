@@ -1,0 +1,236 @@
+"""The auxiliary particle filter (Pitt & Shephard 1999) with a tempered look-ahead: ``rpf``.
+
+Why: the paper's bootstrap SIR proposes from the transition prior and weighs afterwards. Its
+position noise is tiny (sqrt(q1) T^2/2 = 0.16 m per step) and two sharp likelihoods (z_k and the
+transfer) multiply: after resampling, a cloud whose velocity or turn rate is slightly off has no
+particle left where the next measurement points, and it never comes back (lost tracks under the
+paper's own parameters; docs/rpf.md measures it). The position at k is almost entirely decided by
+x_{k-1}, so the remedy is to choose *which* particles to propagate with the data of step k
+before propagating them.
+
+One step, given the weighted cloud (x_{k-1}^i, w_{k-1}^i) and every statement of step k (z_k, the
+transfers: their product is the likelihood l_k):
+
+1. m_i = f(x_{k-1}^i), the transition's mean;
+2. first stage: ancestors a_i by systematic resampling on w_{k-1}^i l_k(m_i)^beta;
+3. x_k^i = m_{a_i} + L v_i, v_i ~ N(0, I_r) with L = Q_sqrt (the prior as proposal, so Q_v is
+   sampled through its square root and never inverted);
+4. second stage: w_k^i ∝ l_k(x_k^i) / l_k(m_{a_i})^beta, normalised.
+
+The weights are exact for this proposal: the first stage's factor l_k(m)^beta is divided out in
+the second, so (x_k^i, w_k^i) targets p(x_k | z_{1:k}) with no heuristic reweighting; beta = 0
+is the bootstrap filter with the resampling moved before the propagation. beta < 1 tempers the
+look-ahead, because l_k(m) ignores the spread L v adds (it would be overconfident at beta = 1 when
+the likelihood is sharper than that spread). The estimate is the weighted cloud's mean and
+covariance plus Q_v, as the paper writes the SIR's.
+
+Random numbers, per run and in this order, are the bootstrap filter's: the propagation's
+uniforms in ``predict`` (so a source can preview its predicted cloud, slot i taking noise v_i
+whatever its ancestor, and then propagate with the very same noise), and one uniform in
+``update`` for the systematic offset. The fast path (:mod:`~.fastpath`) runs every pass as a
+kernel for the models it lists; any other model runs the same algorithm in NumPy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.filters import fastpath
+from tltrack.filters.base import Estimate
+from tltrack.filters.kernels import auxiliary, gaussians
+from tltrack.filters.likelihood import Likelihood
+from tltrack.models.base import MeasurementModel, MotionModel
+from tltrack.models.observation import Observation
+
+Array = NDArray[np.float64]
+
+#: the look-ahead's exponent (docs/rpf.md, "tuning": chosen on seed 11, not on reported seeds)
+BETA = 0.3
+
+
+class AuxiliaryParticleFilter:
+    """The auxiliary particle filter over B runs, with the :class:`~tltrack.filters.base.Filter`
+    interface; one random stream per run, as :class:`~tltrack.filters.particle.ParticleFilter`."""
+
+    def __init__(
+        self,
+        model: MotionModel,
+        x0_hat: Array,
+        P0: Array,
+        n_particles: int,
+        rngs: Sequence[np.random.Generator],
+        beta: float = BETA,
+    ) -> None:
+        """Draw N particles per run from N(x0_hat[:, b], P0), equally weighted."""
+        self.model, self.rngs, self.N, self.beta = model, list(rngs), n_particles, beta
+        n, B = x0_hat.shape
+        if len(self.rngs) != B:
+            raise ValueError(f"{len(self.rngs)} random streams for a batch of {B} runs")
+        L0 = np.linalg.cholesky(P0)
+        eps = np.empty((n, B, self.N))
+        for b, g in enumerate(self.rngs):
+            eps[:, b, :] = g.standard_normal((n, self.N))
+        self._x: Array = np.ascontiguousarray(x0_hat[:, :, None] + np.tensordot(L0, eps, axes=1))
+        self._logw = np.full((B, self.N), -np.log(self.N))
+        self._L = fastpath.f64(model.Q_sqrt)
+        self._r = self._L.shape[1]
+        self._propagate = fastpath.propagator(model, self.N)
+        self._likelihood = Likelihood(B)
+        self._U = np.empty((B, gaussians.uniforms_per_run(self._r, self.N)))
+        self._pending = False  # predict() was called: the propagation waits for update()
+        self._preview: Array | None = None  # the unselected predicted cloud, when asked for
+        self._reset: dict[int, Array] = {}  # runs a recovery redrew while pending
+        self._moments: tuple[Array, Array] | None = None
+        self._anc = np.empty((B, self.N + 1), dtype=np.int64)
+        self._identity = np.broadcast_to(np.arange(self.N + 1), (B, self.N + 1)).copy()
+
+    @property
+    def batch(self) -> int:
+        return len(self.rngs)
+
+    # ---- the Filter interface ---------------------------------------------------------------
+
+    def predict(self) -> None:
+        """Draw the propagation's noise; the propagation itself waits for the data of the step
+        (:meth:`update`). Two predicts in a row move the cloud on, its weights unchanged."""
+        if self._pending:
+            self._x = self._propagated(self._identity)
+            self._apply_reset(self._x)
+            self._reset = {}
+        for b, g in enumerate(self.rngs):
+            g.random(out=self._U[b])
+        self._pending, self._preview, self._moments = True, None, None
+
+    def update(self, observations: Sequence[Observation]) -> None:
+        """The two stages on every statement of the step (eqs. in the module docstring)."""
+        if not self._pending:
+            raise RuntimeError("update() needs predict() first")
+        x_prev, (B, N) = self._x, self._logw.shape
+        m = np.empty_like(x_prev)
+        if self._propagate is not None and self._fast(x_prev):
+            self._propagate.mean(x_prev, m)
+        else:
+            m = np.ascontiguousarray(self.model.f(x_prev))
+        la = np.empty((B, N))
+        self._likelihood.into(m, observations, la)
+        u = np.array([g.random() for g in self.rngs])
+        ok = np.empty(B, dtype=np.bool_)
+        auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok)
+        for b in self._reset:  # a redrawn run takes its new particles as they are
+            la[b] = 0.0
+            ok[b] = True
+        anc = np.where(ok[:, None], self._anc, self._identity)  # a failed run stays NaN below
+        x = self._propagated(anc, x_prev)
+        self._apply_reset(x)
+        ll = np.empty((B, N))
+        self._likelihood.into(x, observations, ll)
+        mean, cov = np.empty((B, x.shape[0])), np.empty((B, x.shape[0], x.shape[0]))
+        auxiliary.second_stage(ll, la, anc, self.beta, x, self._logw, mean, cov, ok, np.empty(N))
+        if not ok.all():  # weights not finite (NaN particles): the run reads as lost
+            x[:, ~ok, :] = np.nan
+            self._logw[~ok] = -np.log(N)
+            mean[~ok], cov[~ok] = np.nan, np.nan
+        self._x, self._moments = x, (mean, cov)
+        self._pending, self._preview, self._reset = False, None, {}
+
+    def estimate(self) -> Estimate:
+        """The weighted cloud's mean and covariance, plus Q_v (as the paper's SIR reports)."""
+        if self._moments is None:
+            self._moments = _weighted_moments(self.x, self._weights())
+        mean, cov = self._moments
+        return Estimate(mean.copy(), cov + self.model.Q)
+
+    def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
+        """eta_hat and P_eta_eta: the weighted moments of h over the predicted cloud (seed eqs.
+        BTL_sr_pred_obser_mean/cov, with the weights an auxiliary filter carries)."""
+        x = self.x
+        kernels = self._likelihood.kernels(sensor)
+        if kernels is not None and self._fast(x):
+            eta, cov = kernels.predicted_observation(x, sensor, self._logw)
+            return Observation(sensor, eta, cov + R)
+        Z = sensor.h(x)  # (n_z, B, N)
+        w = self._weights()
+        eta = sensor.mean(Z, axis=2, weights=w)
+        D = sensor.residual(Z, eta[:, :, None])
+        cov = np.einsum("ibn,jbn->bij", D * w[None], D)
+        return Observation(sensor, eta, cov + R)
+
+    def adopt(self, other: AuxiliaryParticleFilter, runs: NDArray[np.bool_]) -> None:
+        """``other``'s weighted cloud for ``runs`` (the robust TL's rollback to its twin)."""
+        if self._pending or other._pending:
+            raise RuntimeError("adopt() between update() and predict() only")
+        self._x = np.array(self._x)
+        self._x[:, runs] = other._x[:, runs]
+        self._logw[runs] = other._logw[runs]
+        if self._moments is not None and other._moments is not None:
+            mean, cov = (np.array(a) for a in self._moments)
+            mean[runs], cov[runs] = other._moments[0][runs], other._moments[1][runs]
+            self._moments = (mean, cov)
+
+    # ---- the cloud --------------------------------------------------------------------------
+
+    @property
+    def x(self) -> Array:
+        """The particles (n_x, B, N): after predict, the predicted cloud (each particle moved by
+        its own noise, unselected); after update, the weighted posterior cloud. Read-only: a
+        recovery redraws a run through :meth:`reinitialise`."""
+        if self._pending:
+            if self._preview is None:
+                self._preview = self._propagated(self._identity)
+                self._apply_reset(self._preview)
+                self._preview.flags.writeable = False
+            return self._preview
+        return self._x
+
+    def reinitialise(self, b: int, particles: Array) -> None:
+        """Run ``b`` restarts from ``particles`` (n_x, N), equally weighted: after predict, they
+        are its predicted cloud, weighed by this step's statements alone (a lost-track
+        recovery)."""
+        self._logw[b] = -np.log(self.N)
+        if self._pending:
+            self._reset[b] = np.array(particles, dtype=np.float64)
+            self._preview = None
+        else:
+            self._x = np.array(self._x)
+            self._x[:, b, :] = particles
+            self._moments = None
+
+    def gaussians(self) -> Array:
+        """This step's process-noise Gaussians (r, B, N), made from the uniforms of predict."""
+        E = np.empty((self.batch, self._r, self.N))
+        gaussians.gaussians(self._U, E)
+        return E.transpose(1, 0, 2)
+
+    def _weights(self) -> Array:
+        w = np.exp(self._logw - self._logw.max(axis=1, keepdims=True))
+        return np.asarray(w / w.sum(axis=1, keepdims=True))
+
+    def _fast(self, x: Array) -> bool:
+        return x.dtype == np.float64 and x.flags.c_contiguous
+
+    def _propagated(self, anc: NDArray[np.int64], x_prev: Array | None = None) -> Array:
+        """x^i = f(x_prev^{anc_i}) + L v_i with this step's noise v (slot i: v_i)."""
+        src = self._x if x_prev is None else x_prev
+        if self._propagate is not None and self._fast(src):
+            out = np.empty_like(src)
+            for b in range(self.batch):
+                self._propagate(src, anc, self._U[b : b + 1], out, b)
+            return out
+        chosen = np.take_along_axis(src, anc[None, :, : self.N], axis=2)
+        return np.ascontiguousarray(
+            self.model.f(chosen) + np.tensordot(self._L, self.gaussians(), axes=1)
+        )
+
+    def _apply_reset(self, x: Array) -> None:
+        for b, particles in self._reset.items():
+            x[:, b, :] = particles
+
+
+def _weighted_moments(x: Array, w: Array) -> tuple[Array, Array]:
+    """Mean (B, n) and covariance (B, n, n) of clouds x (n, B, N) with weights w (B, N)."""
+    mean = np.einsum("ibn,bn->bi", x, w)
+    d = x - mean.T[:, :, None]
+    return mean, np.einsum("ibn,jbn->bij", d * w[None], d)

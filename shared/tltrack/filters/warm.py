@@ -1,0 +1,34 @@
+"""Compiling the particle filters' kernels ahead of use."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tltrack.filters import fastpath
+from tltrack.filters.auxiliary import AuxiliaryParticleFilter
+from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.resampling import systematic_indices
+from tltrack.models.observation import Observation
+
+
+def warm_up() -> None:
+    """Load (or, on a cold cache, compile) every fast-path kernel, on a tiny problem.
+
+    Call it in a parent process before starting workers, so they find numba's cache on disk
+    instead of compiling the same kernels side by side.
+    """
+    rngs = [np.random.default_rng(0)]
+    for model, sensor in fastpath.examples():
+        z = Observation.broadcast(sensor, sensor.h(np.full(model.n, 1000.0)), sensor.R(1.0))
+        n = model.n
+        x0 = np.full((n, 1), 1000.0)
+        for kind in (ParticleFilter, AuxiliaryParticleFilter):
+            pf = kind(model, x0, np.eye(n), 8, rngs)
+            pf.predict()
+            pf.estimate()
+            pf.predicted_observation(sensor, sensor.R(1.0))
+            pf.update([z, z])
+            pf.estimate()
+            _ = pf.x
+            pf.gaussians()
+    systematic_indices(np.full((1, 4), 0.25), rngs)
