@@ -105,3 +105,19 @@ def test_the_realizations_study_places_the_papers_numbers_in_its_distribution(tm
 def test_bad_study_options_are_refused_naming_them(tmp_path, args, needle):
     r = CliRunner().invoke(app, ["study", *args, "--runs", "2", "--out", str(tmp_path)])
     assert r.exit_code == 2 and needle in r.output, r.output
+
+
+@pytest.mark.slow
+def test_the_bench_times_every_row_side_by_side(tmp_path):
+    """What it measures, not how fast: every row present (Stone Soup only with its extra)."""
+    out = tmp_path / "bench.json"
+    args = ["bench", "--particles", "200", "--repeats", "1", "--json", str(out)]
+    r = CliRunner().invoke(app, args)
+        app, ["bench", "--particles", "200", "--repeats", "1", "--json", str(out)]
+    )
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    timed = {n: v for n, v in doc["ms_per_step"].items() if n != "stonesoup"}
+    assert set(timed) >= {"tl-pf", "pf", "source-pf", "tl-rpf", "rpf", "source-rpf", "user-model"}
+    assert all(v is not None and v > 0 for v in timed.values()), timed
+    assert set(doc["rpf_over_pf"]) == {"", "tl-", "source-"}

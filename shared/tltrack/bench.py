@@ -16,6 +16,8 @@ What one "step" is, per name:
   (5, N) layout, noise as Q_sqrt times ``standard_normal``, log-likelihoods with ``hypot`` and
   ``arctan2``, resampling with ``cumsum`` + ``searchsorted``, then the mean and covariance. It is a
   yardstick, deliberately untuned;
+- ``rpf``, ``tl-rpf``, ``source-rpf``: the same steps of the auxiliary particle filter
+  (docs/rpf.md), the TL one fed by ``source-rpf``;
 - ``user-model``: the ``tl-pf`` step with sensors the fast path does not know (a user's own
   range-bearing class, :class:`UserRangeBearing`): the particle filter's generic NumPy path for
   the likelihood and the predicted observation, as any new sensor gets until it has a kernel;
@@ -40,6 +42,7 @@ from numpy.typing import NDArray
 from tltrack.config import Config, make_config
 from tltrack.engine.scenario import simulate
 from tltrack.engine.streams import stream
+from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models.angles import wrap_angle
@@ -49,11 +52,23 @@ from tltrack.models.observation import Observation
 from tltrack.models.range_bearing import RangeBearing
 
 Array = NDArray[np.float64]
-NAMES = ("tl-pf", "pf", "source-pf", "user-model", "numpy-baseline", "stonesoup")
+NAMES = (
+    "tl-pf",
+    "pf",
+    "source-pf",
+    "tl-rpf",
+    "rpf",
+    "source-rpf",
+    "user-model",
+    "numpy-baseline",
+    "stonesoup",
+)
 
 
 #: the steps that take the source's transfer: timed only once there is one (from k = 2)
-TL_STEPS = ("tl-pf", "user-model", "numpy-baseline")
+TL_STEPS = ("tl-pf", "tl-rpf", "user-model", "numpy-baseline")
+#: this step's transfer of each source filter (by its name)
+Transfers = dict[str, Observation]
 
 
 @dataclass(frozen=True)
@@ -163,8 +178,13 @@ def _one_pass(
     def pf(purpose: str) -> ParticleFilter:
         return ParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
 
+    def rpf(purpose: str) -> AuxiliaryParticleFilter:
+        return AuxiliaryParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
+
     source = Source(pf("source-pf"), s_s, R_s)
     tl, iso, user = Primary(pf("tl-pf")), Primary(pf("pf")), Primary(pf("user-model"))
+    r_source = Source(rpf("source-rpf"), s_s, R_s)
+    r_tl, r_iso = Primary(rpf("tl-rpf")), Primary(rpf("rpf"))
     u_p, u_s = (UserRangeBearing(s.sigma_r, s.sigma_bearing, s.layout, s.position) for s in rb)
     base = NumpyBaseline(model, sim.x0_hat, P0, cfg.particles, stream(seed, 0, "numpy-baseline"))
     ss = (
@@ -183,36 +203,44 @@ def _one_pass(
         mine = replace(z_p, sensor=u_p)
         user.step(mine, [] if t is None else [replace(t, sensor=u_s)])
 
-    #: name -> one step, given (k, z_p, z_s, the transfer for k); a source returns its next one
-    steppers: dict[str, Callable[[int, Observation, Observation, Observation | None], Any]] = {
+    def tl_step(primary: Primary, z_p: Observation, t: Observation | None) -> None:
+        primary.step(z_p, [] if t is None else [t])
+
+    #: name -> one step, given (k, z_p, z_s, the transfers for k by source); a source returns
+    #: its next transfer
+    steppers: dict[str, Callable[[int, Observation, Observation, Transfers], Any]] = {
         "source-pf": lambda k, z_p, z_s, t: source.step(z_s)[1],
-        "tl-pf": lambda k, z_p, z_s, t: tl.step(z_p, [] if t is None else [t]),
+        "tl-pf": lambda k, z_p, z_s, t: tl_step(tl, z_p, t.get("source-pf")),
         "pf": lambda k, z_p, z_s, t: iso.step(z_p),
-        "user-model": lambda k, z_p, z_s, t: user_step(z_p, t),
-        "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, z_p, t),
+        "source-rpf": lambda k, z_p, z_s, t: r_source.step(z_s)[1],
+        "tl-rpf": lambda k, z_p, z_s, t: tl_step(r_tl, z_p, t.get("source-rpf")),
+        "rpf": lambda k, z_p, z_s, t: r_iso.step(z_p),
+        "user-model": lambda k, z_p, z_s, t: user_step(z_p, t.get("source-pf")),
+        "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, z_p, t.get("source-pf")),
     }
     if ss is not None:
         steppers["stonesoup"] = lambda k, z_p, z_s, t: ss(k)
     names = [n for n in NAMES if n in steppers]
 
-    transfer: Observation | None = None
+    transfers: Transfers = {}
     clock = time.perf_counter
     order = np.random.default_rng(seed)
     for k in range(1, steps + 1):
         z_p = Observation.broadcast(s_p, sim.z[PRIMARY][k - 1], R_p)
         z_s = Observation.broadcast(s_s, sim.z[sid][k - 1], R_s)
-        upcoming = None
+        upcoming: Transfers = {}
         # a fresh order every step: no filter always runs right after the same one (whose memory
         # traffic it would inherit). The transfer for k + 1 waits until k + 1: any order works.
         for i in order.permutation(len(names)):
             name = names[i]
             t0 = clock()
-            got = steppers[name](k, z_p, z_s, transfer)
+            got = steppers[name](k, z_p, z_s, transfers)
             dt = clock() - t0
-            upcoming = got if name == "source-pf" else upcoming
-            if transfer is not None or name not in TL_STEPS:
+            if name.startswith("source-"):
+                upcoming[name] = got
+            if transfers or name not in TL_STEPS:
                 times[name].append(dt)  # k = 1 has no transfer yet: not a TL step
-        transfer = upcoming
+        transfers = upcoming
     return ss is not None
 
 
@@ -260,11 +288,15 @@ def run_bench(
         v = ms[name]
         return None if v is None else v / tl
 
-    user, baseline = ms["user-model"], ms["numpy-baseline"]
+    def over(a: str, b: str) -> float | None:
+        x, y = ms[a], ms[b]
+        return None if x is None or not y else x / y
+
     return {
         "ms_per_step": ms,
         "speedup": {"numpy-baseline": ratio("numpy-baseline"), "stonesoup": ratio("stonesoup")},
-        "user_model_over_numpy_baseline": None if user is None or not baseline else user / baseline,
+        "user_model_over_numpy_baseline": over("user-model", "numpy-baseline"),
+        "rpf_over_pf": {r: over(f"{r}rpf", f"{r}pf") for r in ("", "tl-", "source-")},
     }
 
 
@@ -277,6 +309,8 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"tl-pf speedup vs {name}: {'n/a' if v is None else f'{v:.1f}x'}")
     u = result.get("user_model_over_numpy_baseline")
     lines.append(f"user-model / numpy-baseline: {'n/a' if u is None else f'{u:.2f}x'}")
+    for role, v in result.get("rpf_over_pf", {}).items():
+        lines.append(f"{role}rpf / {role}pf: {'n/a' if v is None else f'{v:.2f}x'}")
     return "\n".join(lines)
 
 
