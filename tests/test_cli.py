@@ -113,8 +113,6 @@ def test_the_bench_times_every_row_side_by_side(tmp_path):
     out = tmp_path / "bench.json"
     args = ["bench", "--particles", "200", "--repeats", "1", "--json", str(out)]
     r = CliRunner().invoke(app, args)
-        app, ["bench", "--particles", "200", "--repeats", "1", "--json", str(out)]
-    )
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     timed = {n: v for n, v in doc["ms_per_step"].items() if n != "stonesoup"}
