@@ -54,3 +54,18 @@ def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
     for name, r in alone.items():
         assert docs["a"]["filters"][name]["rmse_per_step"] == r.rmse_per_step, name
     assert rep.wall_minutes(docs) == docs["a"]["wall_s"] / 60  # one sweep, counted once
+
+
+def test_the_lost_track_table_alone_has_both_particle_filters_and_the_ukf(tmp_path):
+    r = CliRunner().invoke(
+        app, ["reproduce", "--runs", "2", "--losses-only", "--out", str(tmp_path)]
+    )
+    assert r.exit_code == 0, r.output
+    table = (tmp_path / "losses.md").read_text()
+    header = next(ln for ln in table.splitlines() if ln.startswith("| preset | truth | runs"))
+    for name in ("source-pf", "tl-pf", "source-rpf", "tl-rpf", "robust-tl-rpf", "tl-ukf"):
+        assert f"| {name} |" in header + " |", name
+    rows = [ln for ln in table.splitlines() if ln.startswith(("| paper |", "| arasaratnam"))]
+    assert len(rows) == 2 * 6  # both presets, three truth modes, lost shares then RMSE
+    both = ["reproduce", "--runs", "2", "--losses-only", "--table2-pf-only"]
+    assert CliRunner().invoke(app, [*both, "--out", str(tmp_path)]).exit_code == 2

@@ -260,18 +260,29 @@ def reproduce(
     table2_pf_only: Annotated[
         bool, typer.Option(help="only Table 2's particle-filter rows (the 10,000-run benchmark)")
     ] = False,
+    losses_only: Annotated[
+        bool, typer.Option(help="only the lost-track table, for both presets and truth modes")
+    ] = False,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
 ) -> None:
     """Regenerate every figure and table of the paper's Simulation Results, with report.md."""
     from tltrack import reproduce as rep
 
+    if table2_pf_only and losses_only:
+        console.print("[red]error:[/red] --table2-pf-only and --losses-only: choose one")
+        raise typer.Exit(2)
     try:
         base = rep.base_config(preset, truth, runs, seed)
     except ConfigError as err:
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
-    todo = rep.table2_pf_jobs(base) if table2_pf_only else rep.jobs(base) + rep.loss_jobs(base)
+    if table2_pf_only:
+        todo, write = rep.table2_pf_jobs(base), rep.table2_pf_report
+    elif losses_only:
+        todo, write = rep.loss_jobs(base), rep.losses_report
+    else:
+        todo, write = rep.jobs(base) + rep.loss_jobs(base), rep.report
     with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
         tasks = {j.label: bar.add_task(j.label, total=runs) for j in todo}
         docs = rep.run_all(
@@ -282,7 +293,7 @@ def reproduce(
             executor=executor,
             progress=lambda label, n: bar.advance(tasks[label], n),
         )
-    made = rep.table2_pf_report(docs, out) if table2_pf_only else rep.report(docs, out)
+    made = write(docs, out)
     console.print(f"wrote {made}")
 
 

@@ -22,6 +22,11 @@ from tltrack.engine.montecarlo import expand, run_sweep
 
 KF_FILTERS = ["ukf", "tl-ukf", "ckf3", "tl-ckf3", "ckf5", "tl-ckf5"]
 PF_FILTERS = ["pf", "tl-pf"]
+#: the auxiliary particle filter that keeps the track (docs/rpf.md), beside the paper's SIR
+RPF_FILTERS = ["rpf", "tl-rpf"]
+#: what the lost-track jobs compare: both particle filters, the robust one, the UKF's share
+LOSS_FILTERS = [*PF_FILTERS, *RPF_FILTERS, "robust-tl-rpf", "ukf", "tl-ukf"]
+ALL_FILTERS = PF_FILTERS + RPF_FILTERS + KF_FILTERS
 INTENSITIES = list(range(1, 9))
 PARTICLES = [3000, 6000, 9000, 12000]
 
@@ -71,7 +76,7 @@ DELTA_AT_DI: dict[tuple[str, int], float] = {
 }
 
 
-KINDS = ["pf", "ukf", "ckf3", "ckf5"]
+KINDS = ["pf", "rpf", "ukf", "ckf3", "ckf5"]
 S1 = "s1"  #: the label of Scenario 1's job
 LOSS = "loss_"  #: the prefix of the lost-track jobs' labels
 
@@ -94,7 +99,7 @@ def loss_jobs(base: Config) -> list[Job]:
         Job(
             f"{LOSS}{p}_{t}",
             base.with_(scenario="ct", preset=p, truth=t, particles=6000, primary_intensity=4),
-            PF_FILTERS,
+            LOSS_FILTERS,
         )
         for p in ("paper", "arasaratnam-haykin")
         for t in ("fixed", "random", "noise-free")
@@ -104,7 +109,7 @@ def loss_jobs(base: Config) -> list[Job]:
 def table2_pf_jobs(base: Config) -> list[Job]:
     """Only Table 2's particle-filter rows (the 10,000-run target of the performance issue)."""
     ct = base.with_(scenario="ct", primary_intensity=4)
-    return [Job(s2_label(4, n), ct.with_(particles=n), PF_FILTERS) for n in PARTICLES]
+    return [Job(s2_label(4, n), ct.with_(particles=n), PF_FILTERS + RPF_FILTERS) for n in PARTICLES]
 
 
 def jobs(base: Config) -> list[Job]:
@@ -114,15 +119,12 @@ def jobs(base: Config) -> list[Job]:
         Job(
             S1,
             base.with_(scenario="cv", particles=6000, primary_intensity=4),
-            PF_FILTERS + KF_FILTERS[:4],
+            PF_FILTERS + RPF_FILTERS + KF_FILTERS[:4],
         )
     ]
+    out += [Job(s2_label(i), ct.with_(primary_intensity=i), ALL_FILTERS) for i in INTENSITIES]
     out += [
-        Job(s2_label(i), ct.with_(primary_intensity=i), PF_FILTERS + KF_FILTERS)
-        for i in INTENSITIES
-    ]
-    out += [
-        Job(s2_label(4, n), ct.with_(particles=n, primary_intensity=4), PF_FILTERS)
+        Job(s2_label(4, n), ct.with_(particles=n, primary_intensity=4), PF_FILTERS + RPF_FILTERS)
         for n in PARTICLES
         if n != 6000
     ]
@@ -205,38 +207,44 @@ def _row(cells: Iterable[Any]) -> str:
 
 
 def table2_pf_report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
-    """Table 2's particle-filter rows only, beside the paper's, with the wall time."""
+    """Table 2's particle-filter rows only, beside the paper's, with the wall time: the paper's
+    SIR (``pf``) and the auxiliary filter that keeps the track (``rpf``), on the same runs."""
     lines = [
         "# Table 2, particle-filter rows",
         "",
         _row(
             [
                 "N",
+                "filter",
                 "RMSE iso (paper / ours)",
                 "RMSE TL (paper / ours)",
                 "lost iso / TL",
+                "ms iso / TL",
                 "runs",
                 "wall [min]",
             ]
         ),
-        _row(["---"] * 6),
+        _row(["---"] * 8),
     ]
     for n in PARTICLES:
         d = docs[s2_label(4, n)]
-        iso, tl = d["filters"]["pf"], d["filters"]["tl-pf"]
         r_iso, _, r_tl, _ = TABLE2["pf", n]
-        lines.append(
-            _row(
-                [
-                    n,
-                    f"{r_iso} / {iso['rmse_overall']:.2f}",
-                    f"{r_tl} / {tl['rmse_overall']:.2f}",
-                    f"{iso['lost_fraction']:.1%} / {tl['lost_fraction']:.1%}",
-                    d["config"]["runs"],
-                    f"{d['wall_s'] / 60:.1f}",
-                ]
+        for kind in ("pf", "rpf"):
+            iso, tl = d["filters"][kind], d["filters"][f"tl-{kind}"]
+            lines.append(
+                _row(
+                    [
+                        n,
+                        kind,
+                        f"{r_iso} / {iso['rmse_overall']:.2f}",
+                        f"{r_tl} / {tl['rmse_overall']:.2f}",
+                        f"{iso['lost_fraction']:.2%} / {tl['lost_fraction']:.2%}",
+                        f"{_fmt(iso['ms_per_step'], 3)} / {_fmt(tl['ms_per_step'], 3)}",
+                        d["config"]["runs"],
+                        f"{d['wall_s'] / 60:.1f}",
+                    ]
+                )
             )
-        )
     lines += ["", f"Total wall time: {wall_minutes(docs):.1f} min."]
     path = out / "table2_pf.md"
     path.write_text("\n".join(lines) + "\n")
@@ -268,7 +276,12 @@ def table2_section(f: Results) -> list[str]:
         ),
         _row(["---"] * 11),
     ]
-    for (kind, n), (r_iso, t_iso, r_tl, t_tl) in TABLE2.items():
+    rows = [
+        (ours, n, paper)
+        for (kind, n), paper in TABLE2.items()
+        for ours in ([kind, "rpf"] if kind == "pf" else [kind])  # rpf beside the paper's PF
+    ]
+    for kind, n, (r_iso, t_iso, r_tl, t_tl) in rows:
         res = f[s2_label(4, n or 6000)]
         iso, tl = res[kind], res[f"tl-{kind}"]
         points = n or {"ckf3": 10, "ukf": 11, "ckf5": 51}[kind]
@@ -311,12 +324,12 @@ def rmse_against_ip_section(f: Results) -> list[str]:
     lines = [
         "## Overall RMSE against I_p (N = 6000)",
         "",
-        _row(["I_p", *(n for n in PF_FILTERS + KF_FILTERS)]),
-        _row(["---"] * 9),
+        _row(["I_p", *ALL_FILTERS]),
+        _row(["---"] * (1 + len(ALL_FILTERS))),
     ]
     for i in INTENSITIES:
         row = [f"{i}"]
-        for name in PF_FILTERS + KF_FILTERS:
+        for name in ALL_FILTERS:
             ours = f[s2_label(i)][name]["rmse_overall"]
             ref_ip = RMSE_AT_IP.get((name, i))
             row.append(_fmt(ours) + ("" if ref_ip is None else f" (paper {ref_ip:.2f})"))
@@ -341,7 +354,7 @@ def gain_section(gains: dict[str, list[float]]) -> list[str]:
         "## Delta RMSE = RMSE iso - RMSE TL against Delta I = I_p - I_s",
         "",
         _row(["Delta I", *KINDS]),
-        _row(["---"] * 5),
+        _row(["---"] * (1 + len(KINDS))),
     ]
     for j, i in enumerate(INTENSITIES):
         row = [f"{i - 1}"]
@@ -354,12 +367,12 @@ def gain_section(gains: dict[str, list[float]]) -> list[str]:
 
 def lost_by_job_section(f: Results) -> list[str]:
     """The share of lost runs of every filter in every job."""
-    names = PF_FILTERS + KF_FILTERS
+    names = ALL_FILTERS
     lines = [
         "## Share of runs that lost track (final error > threshold)",
         "",
         _row(["job", *names]),
-        _row(["---"] * 9),
+        _row(["---"] * (1 + len(names))),
     ]
     for label, res in f.items():
         cells = (f"{res[n]['lost_fraction']:.1%}" if n in res else "–" for n in names)
@@ -368,14 +381,15 @@ def lost_by_job_section(f: Results) -> list[str]:
 
 
 def lost_by_truth_section(docs: dict[str, dict[str, Any]]) -> list[str]:
-    """Lost runs and RMSE of the PF rows under each preset and truth mode."""
+    """Lost runs (and their MC error, 2 x the binomial SE) under each preset and truth mode."""
     lines = [
         "## Lost tracks under each preset and truth mode (N = 6000, I_p = 4)",
         "",
-        _row(
-            ["preset", "truth", "lost source-pf", "lost pf", "lost tl-pf", "RMSE pf", "RMSE tl-pf"]
-        ),
-        _row(["---"] * 7),
+        "A run is lost when its final position error exceeds the threshold (100 m). Each cell is "
+        "the share of lost runs, with its MC error (2 x its binomial standard error) in brackets.",
+        "",
+        _row(["preset", "truth", "runs", *LOST_COLUMNS]),
+        _row(["---"] * (3 + len(LOST_COLUMNS))),
     ]
     for label, d in docs.items():
         if label.startswith(LOSS):
@@ -385,13 +399,50 @@ def lost_by_truth_section(docs: dict[str, dict[str, Any]]) -> list[str]:
                     [
                         c["preset"],
                         c["truth"],
-                        *(f"{res[n]['lost_fraction']:.1%}" for n in ("source-pf", "pf", "tl-pf")),
-                        _fmt(res["pf"]["rmse_overall"]),
-                        _fmt(res["tl-pf"]["rmse_overall"]),
+                        c["runs"],
+                        *(_lost(res[n], c["runs"]) if n in res else "–" for n in LOST_COLUMNS),
                     ]
                 )
             )
+    lines += [
+        "",
+        _row(["preset", "truth", *(f"RMSE {n}" for n in LOST_RMSE)]),
+        _row(["---"] * (2 + len(LOST_RMSE))),
+    ]
+    for label, d in docs.items():
+        if label.startswith(LOSS):
+            res, c = d["filters"], d["config"]
+            rmse = (_fmt(res[n]["rmse_overall"]) if n in res else "–" for n in LOST_RMSE)
+            lines.append(_row([c["preset"], c["truth"], *rmse]))
     return lines
+
+
+LOST_COLUMNS = [
+    "source-pf",
+    "pf",
+    "tl-pf",
+    "source-rpf",
+    "rpf",
+    "tl-rpf",
+    "robust-tl-rpf",
+    "ukf",
+    "tl-ukf",
+]
+LOST_RMSE = ["pf", "tl-pf", "rpf", "tl-rpf", "robust-tl-rpf", "ukf", "tl-ukf"]
+
+
+def _lost(r: dict[str, Any], runs: int) -> str:
+    p = r["lost_fraction"]
+    return f"{p:.2%} ({2 * (p * (1 - p) / runs) ** 0.5:.2%})"
+
+
+def losses_report(docs: dict[str, dict[str, Any]], out: Path) -> Path:
+    """The lost-track table alone (``tltrack reproduce --losses-only``)."""
+    lines = lost_by_truth_section(docs)
+    lines += ["", f"Total wall time: {wall_minutes(docs):.1f} min."]
+    path = out / "losses.md"
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 def figures(docs: dict[str, dict[str, Any]], gains: dict[str, list[float]], out: Path) -> list[str]:
@@ -401,10 +452,7 @@ def figures(docs: dict[str, dict[str, Any]], gains: dict[str, list[float]], out:
     plots.rmse_vs_time(docs[s2_label(4)], out / "fig_s2_rmse.png", "Scenario 2: RMSE against time")
     plots.curves(
         INTENSITIES,
-        {
-            n: [f[s2_label(i)][n]["rmse_overall"] for i in INTENSITIES]
-            for n in PF_FILTERS + KF_FILTERS
-        },
+        {n: [f[s2_label(i)][n]["rmse_overall"] for i in INTENSITIES] for n in ALL_FILTERS},
         out / "fig_rmse_vs_ip.png",
         xlabel="primary noise intensity I_p",
         ylabel="overall RMSE [m]",
@@ -427,7 +475,10 @@ def figures(docs: dict[str, dict[str, Any]], gains: dict[str, list[float]], out:
     )
     plots.curves(
         PARTICLES,
-        {n: [f[s2_label(4, p)][n]["rmse_overall"] for p in PARTICLES] for n in PF_FILTERS},
+        {
+            n: [f[s2_label(4, p)][n]["rmse_overall"] for p in PARTICLES]
+            for n in PF_FILTERS + RPF_FILTERS
+        },
         out / "fig_rmse_time_vs_n.png",
         xlabel="particles N_s",
         ylabel="overall RMSE [m]",
