@@ -67,7 +67,9 @@ def test_help_has_examples():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["robust", "sources", "budget", "heterogeneous"])
+@pytest.mark.parametrize(
+    "name", ["robust", "sources", "budget", "heterogeneous", "presets", "intensities"]
+)
 def test_each_study_writes_its_table_with_paired_differences(tmp_path, name):
     args = ["study", name, "--runs", "3", "--particles", "300", "--out", str(tmp_path)]
     r = CliRunner().invoke(app, args)

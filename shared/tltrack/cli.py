@@ -442,7 +442,10 @@ def _run_demo(
 )
 def study(
     name: Annotated[
-        str, typer.Argument(help="robust, sources, budget, heterogeneous or realizations")
+        str,
+        typer.Argument(
+            help="robust, sources, budget, heterogeneous, presets, intensities or realizations"
+        ),
     ],
     runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/studies"),
@@ -476,6 +479,8 @@ def study(
         "sources": studies.sources,
         "budget": studies.budget,
         "heterogeneous": studies.heterogeneous,
+        "presets": studies.presets,
+        "intensities": studies.intensities,
     }
     known = [*by_name, "realizations"]
     problems = [

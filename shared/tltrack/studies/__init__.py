@@ -4,6 +4,8 @@
 - :mod:`~.sources`: several source operators, honest or with a biased one among them;
 - :mod:`~.budget`: RMSE against the share of steps that use a transfer;
 - :mod:`~.heterogeneous`: operators with different sensors;
+- :mod:`~.presets`: lost tracks and the paired claims in every preset and truth mode;
+- :mod:`~.intensities`: TL against isolated at every primary intensity;
 - :mod:`~.realizations`: the paper's trajectory as a measured distribution.
 
 :mod:`~.common` holds what they share: a :class:`~.common.Setting` (runs, seed, filter kind,
@@ -13,8 +15,20 @@ base configuration), a :class:`~.common.Runner` (how the engine runs) and paired
 from tltrack.studies.budget import budget
 from tltrack.studies.common import Runner, Setting
 from tltrack.studies.heterogeneous import heterogeneous
+from tltrack.studies.intensities import intensities
+from tltrack.studies.presets import presets
 from tltrack.studies.realizations import realizations
 from tltrack.studies.robust import robust
 from tltrack.studies.sources import sources
 
-__all__ = ["Runner", "Setting", "budget", "heterogeneous", "realizations", "robust", "sources"]
+__all__ = [
+    "Runner",
+    "Setting",
+    "budget",
+    "heterogeneous",
+    "intensities",
+    "presets",
+    "realizations",
+    "robust",
+    "sources",
+]
