@@ -150,7 +150,7 @@ def test_the_page_draws_the_episode_as_it_runs(tmp_path: Path, browser: Any) -> 
         assert drawn() < K, "the screenshot is not mid-episode"
 
         _until(lambda: drawn() == K, 30, "the whole episode", diag)
-        every_track = {"source-pf": K, "tl-pf": K, "pf": K}
+        every_track = {"source-rpf": K, "tl-rpf": K, "rpf": K}
         _until(lambda: look()["filters"] == every_track, 30, "every filter's last step", diag)
         _until(lambda: "complete" in look()["status"], 10, "the episode's end", diag)
         seen = look()

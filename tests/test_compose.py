@@ -503,7 +503,7 @@ def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
     assert all(e["complete"] and e["K"] == STEPS for e in eps), eps
 
     filters = summary["filters"]
-    assert {"pf", "tl-pf", "source-pf"} <= filters.keys(), filters.keys()
+    assert {"rpf", "tl-rpf", "source-rpf"} <= filters.keys(), filters.keys()
     for name, f in filters.items():
         assert f["rmse_overall"] is not None and math.isfinite(f["rmse_overall"]), (name, f)
         assert len(f["rmse_per_step"]) == STEPS, (name, len(f["rmse_per_step"]))
@@ -511,13 +511,13 @@ def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
         assert f["steps"] == EPISODES * STEPS and f["gaps"] == 0, (name, f)
     for operator, service, stats in stack.sql("SELECT operator, service, stats FROM service_stats"):
         print(f"{operator}/{service}: {json.loads(stats).get('counters')}")
-    tl, iso = filters["tl-pf"]["rmse_overall"], filters["pf"]["rmse_overall"]
+    tl, iso = filters["tl-rpf"]["rmse_overall"], filters["rpf"]["rmse_overall"]
     print(
-        f"RMSE over {EPISODES} episodes: tl-pf {tl:.2f} m, pf {iso:.2f} m, "
-        f"source-pf {filters['source-pf']['rmse_overall']:.2f} m"
+        f"RMSE over {EPISODES} episodes: tl-rpf {tl:.2f} m, rpf {iso:.2f} m, "
+        f"source-rpf {filters['source-rpf']['rmse_overall']:.2f} m"
     )
     assert tl < iso, f"TL-PF RMSE {tl:.2f} m is not below the isolated PF's {iso:.2f} m"
-    assert filters["tl-pf"]["steps_with_transfer"] > EPISODES * (STEPS - 1) // 2, filters["tl-pf"]
+    assert filters["tl-rpf"]["steps_with_transfer"] > EPISODES * (STEPS - 1) // 2, filters["tl-rpf"]
     # every health check passes: each looks up its service's own liveliness token under the
     # service's identity, which the ACL grants (and nothing more)
     checked = ("router", "scorer", "primary_tracker", "source_tracker", "dashboard")
@@ -564,7 +564,7 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
 
         # 1. the transfer works before the cut
         def transfers_flowing() -> bool:
-            tl = stack.steps(PART_EPISODE, "tl-pf")
+            tl = stack.steps(PART_EPISODE, "tl-rpf")
             return sum(used for used, _, _ in tl.values()) >= 20
 
         assert wait_until(transfers_flowing, 120, every=0.5), (
@@ -585,15 +585,15 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
 
     # 3. the transfer resumes, and the episode ends and is scored
     def resumed() -> bool:
-        tl = stack.steps(PART_EPISODE, "tl-pf")
+        tl = stack.steps(PART_EPISODE, "tl-rpf")
         return any(used and ts > t_heal for used, ts, _ in tl.values())
 
     wait_until(resumed, 60, every=0.5)
     summary = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "part-")), timeout=120)
     logs = stack.logs("primary_tracker", "source_tracker")
     restarts = stack.restarts()
-    tl = stack.steps(PART_EPISODE, "tl-pf")
-    iso = stack.steps(PART_EPISODE, "pf")
+    tl = stack.steps(PART_EPISODE, "tl-rpf")
+    iso = stack.steps(PART_EPISODE, "rpf")
     timeline = " ".join(
         f"{k}{'+' if used else '-'}@{ts - t_cut:+.1f}"
         for k, (used, ts, _) in sorted(tl.items())
@@ -623,8 +623,8 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
     assert summary is not None and scored(summary, "part-"), "partition episode not scored" + (
         context
     )
-    assert sorted(tl) == list(range(1, PART_STEPS + 1)), "tl-pf missed steps" + context
-    assert sorted(iso) == list(range(1, PART_STEPS + 1)), "pf missed steps" + context
+    assert sorted(tl) == list(range(1, PART_STEPS + 1)), "tl-rpf missed steps" + context
+    assert sorted(iso) == list(range(1, PART_STEPS + 1)), "rpf missed steps" + context
     print(
         f"partition: k={min(cut)}..{max(cut)} isolated while cut off ({len(cut)} steps); "
         f"transfer back at k={after[0]}, {tl[after[0]][1] - t_heal:.1f} s after reconnecting; "
@@ -665,9 +665,9 @@ def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
     }
     print(f"three sources, (estimates, with transfer) per filter: {counts}")
     for sid in ("s1", "s2", "s3"):
-        assert counts.get(f"source-pf/{sid}", (0, 0))[0] == THREE_STEPS, (sid, counts)
-    assert counts["pf"][0] == counts["tl-pf"][0] == THREE_STEPS, counts
-    assert counts["tl-pf"][1] > THREE_STEPS // 2, counts
+        assert counts.get(f"source-rpf/{sid}", (0, 0))[0] == THREE_STEPS, (sid, counts)
+    assert counts["rpf"][0] == counts["tl-rpf"][0] == THREE_STEPS, counts
+    assert counts["tl-rpf"][1] > THREE_STEPS // 2, counts
     # nothing rejected during this episode (each counter counts since its service started)
     rejected = summary["messages"]["rejected"]
     new = {

@@ -356,7 +356,7 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
     ep = snap["episode"]
     assert (ep["id"], ep["K"], ep["last_k"], len(ep["truth"])) == (E, K, K, K)
     scored = summary["filters"]
-    assert {f["name"] for f in ep["filters"]} == set(scored) == {"source-pf", "tl-pf", "pf"}
+    assert {f["name"] for f in ep["filters"]} == set(scored) == {"source-rpf", "tl-rpf", "rpf"}
     for f in ep["filters"]:
         name, role = f["name"], f["role"]
         assert f["rmse"] == pytest.approx(scored[name]["rmse_overall"], rel=1e-9), name
@@ -373,10 +373,10 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
         assert total is not None and 0 < total / K < 5.0, f"mean latency {total} s"
         lat = f["latency_ms"]
         assert 0 < lat["p50"] <= lat["p95"] <= lat["p99"]
-    used = scored["tl-pf"]["steps_with_transfer"]
+    used = scored["tl-rpf"]["steps_with_transfer"]
     assert used == K - 1  # lock-step: every step but the first
-    assert value(m, "tltrack_transfer_steps_total", filter="tl-pf", used="true") == used
-    assert value(m, "tltrack_transfer_steps_total", filter="tl-pf", used="false") == K - used
+    assert value(m, "tltrack_transfer_steps_total", filter="tl-rpf", used="true") == used
+    assert value(m, "tltrack_transfer_steps_total", filter="tl-rpf", used="false") == K - used
     assert value(m, "tltrack_messages_received_total", key="tltrack/truth/*") == K + len(GARBAGE)
     here = value(m, REJECTED, service="referee/dashboard", key=keys.truth(E))
     assert here == len(GARBAGE)

@@ -72,7 +72,7 @@ def stored(db: Path, episode: str, name: str) -> dict[int, tuple[np.ndarray, boo
     }
 
 
-def latest(db: Path, episode: str, name: str = "pf") -> int:
+def latest(db: Path, episode: str, name: str = "rpf") -> int:
     return max(stored(db, episode, name), default=0)
 
 
@@ -127,7 +127,7 @@ class TokenClock:
 
 def kill_and_restart_source(s: demo.Stack, db: Path, at: int) -> tuple[float, TokenClock]:
     """kill -9 the source tracker once the primary has taken step ``at``; restart it at once."""
-    assert wait_until(lambda: latest(db, E1, "tl-pf") >= at, 90), logs(s)
+    assert wait_until(lambda: latest(db, E1, "tl-rpf") >= at, 90), logs(s)
     clock = TokenClock(s.endpoint)
     s.kill("source_tracker")
     t_kill = time.time()
@@ -148,7 +148,7 @@ def test_source_dies_and_returns(tmp_path: Path) -> None:
         assert s.procs["primary_tracker"].poll() is None, logs(s)
         clock.close()
     t_back = clock.back or math.inf
-    tl1, tl2 = stored(db, E1, "tl-pf"), stored(db, E2, "tl-pf")
+    tl1, tl2 = stored(db, E1, "tl-rpf"), stored(db, E2, "tl-rpf")
     assert sorted(tl1) == list(range(1, K + 1)) and sorted(tl2) == list(range(1, K + 1))
     dead = sorted(k for k, (_, _, t, _) in tl1.items() if t_kill + 1 / PACE < t < t_back)
     assert dead, "no step while the source was dead"
@@ -156,8 +156,8 @@ def test_source_dies_and_returns(tmp_path: Path) -> None:
     waited = {k: round(tl1[k][3] - tl1[k][2], 3) for k in dead if tl1[k][3] - tl1[k][2] > 0.5}
     assert not waited, f"steps waited for a dead source: {waited}"
     assert [tl2[k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
-    assert_genuine(db, E1, FIRST_RUN, K, ("pf",))
-    assert_genuine(db, E2, FIRST_RUN + 1, K, ("pf", "source-pf"))
+    assert_genuine(db, E1, FIRST_RUN, K, ("rpf",))
+    assert_genuine(db, E2, FIRST_RUN + 1, K, ("rpf", "source-rpf"))
 
 
 class StaysIsolatedError(AssertionError):
@@ -173,7 +173,7 @@ def test_a_restarted_source_resumes_the_episode_under_way(tmp_path: Path) -> Non
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert wait_for_scored(s.endpoint, 1, 60) is not None, logs(s)
         clock.close()
-    tl = stored(db, E1, "tl-pf")
+    tl = stored(db, E1, "tl-rpf")
     sensed = rows(
         db,
         "SELECT k FROM truth WHERE episode = ? AND t_sensor > ?",
@@ -195,23 +195,23 @@ def test_primary_dies_and_returns(tmp_path: Path) -> None:
         start(s, db, K)
         assert wait_until(lambda: latest(db, E1) >= 15, 90), logs(s)
         s.kill("primary_tracker")
-        killed_at = latest(db, E1, "pf")
+        killed_at = latest(db, E1, "rpf")
         start_service(s, "primary_tracker")
         next_episode(s, K, ["primary_tracker"])
         result = wait_for_scored(s.endpoint, 2, 60)
         assert result is not None, logs(s)
-    pf1, pf2 = stored(db, E1, "pf"), stored(db, E2, "pf")
+    pf1, pf2 = stored(db, E1, "rpf"), stored(db, E2, "rpf")
     assert 15 <= len(pf1) < K, "the primary's crash left no gap"
     assert sorted(pf1)[:15] == list(range(1, 16)) and sorted(pf2) == list(range(1, K + 1))
-    assert result["filters"]["pf"]["gaps"] == K - len(pf1)
-    assert len(stored(db, E1, "source-pf")) == K, "the source was disturbed"
-    tl2 = stored(db, E2, "tl-pf")
+    assert result["filters"]["rpf"]["gaps"] == K - len(pf1)
+    assert len(stored(db, E1, "source-rpf")) == K, "the source was disturbed"
+    tl2 = stored(db, E2, "tl-rpf")
     assert [tl2[k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
     # before the crash, and for the undisturbed source, exactly the engine's; after the restart
     # the primary's filter restarted too, so only its later steps may differ
-    assert_genuine(db, E1, FIRST_RUN, K, ("pf",), upto=killed_at)
-    assert_genuine(db, E1, FIRST_RUN, K, ("source-pf",))
-    assert_genuine(db, E2, FIRST_RUN + 1, K, ("pf", "source-pf"))
+    assert_genuine(db, E1, FIRST_RUN, K, ("rpf",), upto=killed_at)
+    assert_genuine(db, E1, FIRST_RUN, K, ("source-rpf",))
+    assert_genuine(db, E2, FIRST_RUN + 1, K, ("rpf", "source-rpf"))
 
 
 def test_sensor_and_scorer_die_and_return_in_a_lockstep_episode(tmp_path: Path) -> None:
@@ -237,11 +237,11 @@ def test_sensor_and_scorer_die_and_return_in_a_lockstep_episode(tmp_path: Path) 
         final = rows(db, "SELECT * FROM estimates")
         assert all(s.procs[n].poll() is None for n in ("primary_tracker", "source_tracker"))
     assert set(committed) <= set(after_crash) <= set(final), "a committed record was lost"
-    for name in ("pf", "tl-pf", "source-pf"):
+    for name in ("rpf", "tl-rpf", "source-rpf"):
         missing = K - len(stored(db, E1, name))
         assert 0 < missing < K - 45, f"{name}: no gap for the scorer's downtime"
         assert result["filters"][name]["gaps"] == missing
-    assert_genuine(db, E1, FIRST_RUN, K, ("pf", "source-pf", "tl-pf"))
+    assert_genuine(db, E1, FIRST_RUN, K, ("rpf", "source-rpf", "tl-rpf"))
 
 
 def test_router_dies_and_returns(tmp_path: Path) -> None:
@@ -252,10 +252,10 @@ def test_router_dies_and_returns(tmp_path: Path) -> None:
     services = ["primary_tracker", "source_tracker", "scorer"]
     with stack(tmp_path) as s:
         start(s, db, K)
-        assert wait_until(lambda: latest(db, E1, "tl-pf") >= 15, 90), logs(s)
+        assert wait_until(lambda: latest(db, E1, "tl-rpf") >= 15, 90), logs(s)
         n = router_starts(s)
         s.kill("router")
-        killed_at = latest(db, E1, "tl-pf")
+        killed_at = latest(db, E1, "tl-rpf")
         time.sleep(1.0)
         start_router(s)
         wait_for_router(s, n + 1)
@@ -266,7 +266,7 @@ def test_router_dies_and_returns(tmp_path: Path) -> None:
         result = wait_for_scored(s.endpoint, 1, 60)
         assert result is not None, logs(s)
         assert all(s.procs[name].poll() is None for name in services), logs(s)
-    tl = stored(db, E1, "tl-pf")
+    tl = stored(db, E1, "tl-rpf")
     received = sorted(k for (k,) in rows(db, "SELECT k FROM truth WHERE episode = ?", E1))
     # While the router restarts the services reconnect one after another, so a step may reach
     # the scorer and not the primary; before the kill and once everyone is back, none may.
@@ -280,4 +280,4 @@ def test_router_dies_and_returns(tmp_path: Path) -> None:
     assert all(k in tl for k in resumed), "the primary missed steps after the router came back"
     assert all(tl[k][1] for k in resumed), "no transfer after the router came back"
     assert len(rows(db, "SELECT k FROM truth")) < K, "no step was lost: the router was not down"
-    assert_genuine(db, E1, FIRST_RUN, K, ("pf", "source-pf"), upto=killed_at)
+    assert_genuine(db, E1, FIRST_RUN, K, ("rpf", "source-rpf"), upto=killed_at)

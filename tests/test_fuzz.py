@@ -631,8 +631,8 @@ def test_services_survive_a_flood_of_bad_input_beside_a_lockstep_episode(tmp_pat
         assert peak[name] - baseline[name] < 3 * BIG / 1e6 * MB, (name, baseline, peak)
         assert final[name] - baseline[name] < 2 * BIG / 1e6 * MB, (name, baseline, final)
     cfg = make_config(**SIM_DEFAULTS, K=K, particles=N, recovery=True)
-    offline = trace_run(cfg, ["tl-pf", "pf", "source-pf"], run=0)
+    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
     live = estimates(db)
-    for name in ("tl-pf", "pf", "source-pf"):
+    for name in ("tl-rpf", "rpf", "source-rpf"):
         x = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(x, offline[name], rtol=0, atol=1e-9, err_msg=name)

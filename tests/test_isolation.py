@@ -48,7 +48,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(170)]
 needs_openssl = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")
 
 E = "ep-r0"
-FILTERS = ("tl-pf", "pf", "source-pf")
+FILTERS = ("tl-rpf", "rpf", "source-rpf")
 
 #: identity -> (key expressions it may read, key expressions it may not)
 READS: dict[str, tuple[list[str], list[str]]] = {
@@ -174,7 +174,7 @@ def test_each_operator_reads_only_what_the_acl_grants(tmp_path: Path) -> None:
     for name in FILTERS:
         x = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(x, offline[name], rtol=0, atol=1e-9, err_msg=name)
-    assert [live["tl-pf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
+    assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
 
 
 def test_unknown_users_and_wrong_passwords_are_refused(tmp_path: Path) -> None:
@@ -247,7 +247,7 @@ def test_mutual_tls_episode_with_operator_certificates(tmp_path: Path) -> None:
                 time.sleep(0.3)
             assert denied.received == 0
             denied.close()
-    assert result["filters"]["tl-pf"]["steps_with_transfer"] == 14
+    assert result["filters"]["tl-rpf"]["steps_with_transfer"] == 14
 
 
 @contextmanager

@@ -15,11 +15,11 @@ from tltrack.messages import SCHEMA_VERSION
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 
-@pytest.mark.parametrize("robust", [False, True], ids=["tl-pf", "robust-tl-pf"])
+@pytest.mark.parametrize("robust", [False, True], ids=["tl-rpf", "robust-tl-rpf"])
 def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
     db = tmp_path / "scorer.sqlite"
     K, N = 30, 500
-    tl = "robust-tl-pf" if robust else "tl-pf"
+    tl = "robust-tl-rpf" if robust else "tl-rpf"
     primary_env = {"TLTRACK_PRIMARY_LOCKSTEP": "true", "TLTRACK_PRIMARY_ROBUST": str(robust)}
     with stack(tmp_path) as s:
         start_all(s, db, primary_env=primary_env, sim=sim_flags(K, N, pace=0))
@@ -29,9 +29,9 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
     cfg = make_config(
         preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True
     )  # the trackers' default, as the engine's is off
-    offline = trace_run(cfg, [tl, "pf", "source-pf"], run=0)
+    offline = trace_run(cfg, [tl, "rpf", "source-rpf"], run=0)
     live = estimates(db)
-    for name in (tl, "pf", "source-pf"):
+    for name in (tl, "rpf", "source-rpf"):
         x = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(x, offline[name], rtol=0, atol=1e-9, err_msg=name)
     used = [live[tl][k][1] for k in range(1, K + 1)]
@@ -46,17 +46,17 @@ def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
     K = 60
     with stack(tmp_path) as s:
         start_all(s, db, sim=sim_flags(K, 500, pace=20))
-        assert wait_until(lambda: len(estimates(db).get("tl-pf", {})) >= 20, 60), logs(s)
+        assert wait_until(lambda: len(estimates(db).get("tl-rpf", {})) >= 20, 60), logs(s)
         s.kill("source_tracker")
-        killed_at = max(estimates(db)["tl-pf"])
+        killed_at = max(estimates(db)["tl-rpf"])
         assert s.wait("sensor_sim", 60) == 0, logs(s)
         summary = demo.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
-    tl = estimates(db)["tl-pf"]
+    tl = estimates(db)["tl-rpf"]
     assert sorted(tl) == list(range(1, K + 1)), "the primary missed steps"
     assert all(tl[k][1] for k in range(2, killed_at - 1)), "transfer used before the kill"
     assert not any(tl[k][1] for k in range(killed_at + 3, K + 1)), "transfer after the kill"
-    assert summary["filters"]["tl-pf"]["steps_with_transfer"] < K - 10
+    assert summary["filters"]["tl-rpf"]["steps_with_transfer"] < K - 10
 
 
 def test_services_start_in_any_order_router_last(tmp_path):
@@ -71,7 +71,7 @@ def test_services_start_in_any_order_router_last(tmp_path):
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = demo.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
-    for name in ("tl-pf", "pf", "source-pf"):
+    for name in ("tl-rpf", "rpf", "source-rpf"):
         assert summary["filters"][name]["steps"] == 20
         assert summary["filters"][name]["gaps"] == 0
 
@@ -151,7 +151,7 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
         assert summary is not None
         for svc in ("primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"):
             assert sum(summary["messages"]["rejected"][svc].values()) >= len(GARBAGE), svc
-        for name in ("tl-pf", "pf", "source-pf"):
+        for name in ("tl-rpf", "rpf", "source-rpf"):
             assert summary["filters"][name]["steps"] == 15, name
         for name in ("primary_tracker", "source_tracker", "scorer"):
             assert s.procs[name].poll() is None, f"{name} died"
@@ -185,4 +185,4 @@ def test_services_run_against_a_stock_zenohd(tmp_path):
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = demo.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
-    assert summary["filters"]["tl-pf"]["steps_with_transfer"] == 19
+    assert summary["filters"]["tl-rpf"]["steps_with_transfer"] == 19

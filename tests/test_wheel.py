@@ -57,9 +57,9 @@ def test_the_wheel_runs_the_demo_from_any_directory_with_access_control(
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["access_control"] is True
     assert {f: s["steps"] for f, s in summary["filters"].items()} == {
-        "pf": 10,
-        "tl-pf": 10,
-        "source-pf": 10,
+        "rpf": 10,
+        "tl-rpf": 10,
+        "source-rpf": 10,
     }
     shown = out.stderr.replace("\n", "")
     assert f"access control: {venv}" in shown, shown  # the package's ACL, not the clone's
