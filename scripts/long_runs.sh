@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The long Monte-Carlo runs behind the README's tables, one after the other, each timed.
 #
-#   scripts/long_runs.sh [OUT]        # default docs/results/long; each job's log in OUT/*.log
+#   scripts/long_runs.sh [OUT [JOB...]]   # default docs/results/long, every job; logs in OUT/*.log
 #
 # Every job is a documented command; the README quotes its figures, command and wall time.
 set -euo pipefail
@@ -10,24 +10,37 @@ OUT="${1:-$ROOT/docs/results/long}"
 TL="${TLTRACK:-$ROOT/.venv/bin/tltrack}"
 mkdir -p "$OUT"
 
+shift $(( $# > 0 ? 1 : 0 ))
+JOBS=" $* "  # empty: every job
+
 run() {  # run NAME ARGS...: the command, its log and its wall time in OUT/NAME.log
     local name="$1"; shift
+    [[ "$JOBS" == "  " || "$JOBS" == *" $name "* ]] || return 0
     local t0; t0=$(date +%s)
-    echo "\$ tltrack $*" > "$OUT/$name.log"
-    MPLBACKEND=Agg "$TL" "$@" >> "$OUT/$name.log" 2>&1
+    local cmd=("$TL")  # or ARGS = --script FILE ARGS: a benchmark script in the same venv
+    if [[ "$1" == --script ]]; then cmd=("$(dirname "$TL")/python" "$ROOT/$2"); shift 2; fi
+    echo "\$ ${cmd[*]##*/} $*" > "$OUT/$name.log"
+    MPLBACKEND=Agg "${cmd[@]}" "$@" >> "$OUT/$name.log" 2>&1
     echo "wall: $(( $(date +%s) - t0 )) s, load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$OUT/$name.log"
 }
 
+run remedies-eval-s3 --script benchmarks/rpf_remedies.py --runs 300 --seed 3 --betas 0.3,1.0 \
+    --json "$OUT/remedies-eval-s3.json"
+run rpf-paper-fixed experiment --scenario ct --preset paper --truth fixed \
+    --filters pf,tl-pf,rpf,tl-rpf,robust-tl-rpf,ukf,tl-ukf --particles 6000 --runs 1000 \
+    --primary-intensity 4 --seed 1 --out "$OUT/rpf-paper-fixed"
+run realizations-paper study realizations --preset paper --realizations 100 --runs 10 \
+    --filters pf,tl-pf,rpf,tl-rpf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5 --out "$OUT/realizations-paper"
+run realizations-ah study realizations --preset arasaratnam-haykin --realizations 100 --runs 10 \
+    --filters pf,tl-pf,rpf,tl-rpf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5 --out "$OUT/realizations-ah"
+run heterogeneous-rpf study heterogeneous --kind rpf --runs 200 --out "$OUT/heterogeneous-rpf"
+run remedies-tuning-s11 --script benchmarks/rpf_remedies.py --runs 200 --seed 11 --truth-seed 11 \
+    --betas 0.1,0.3,0.6,1.0 --json "$OUT/remedies-tuning-s11.json"
 run presets study presets --kind rpf --runs 1000 --out "$OUT/presets"
 run intensities study intensities --kind rpf --runs 1000 --out "$OUT/intensities"
 run robust-rpf study robust --kind rpf --runs 200 --out "$OUT/robust-rpf"
 run presets-sourcepf study presets --kind rpf --source-filter pf --runs 1000 \
     --out "$OUT/presets-sourcepf"
 run heterogeneous-pf study heterogeneous --runs 200 --out "$OUT/heterogeneous-pf"
-run heterogeneous-rpf study heterogeneous --kind rpf --runs 200 --out "$OUT/heterogeneous-rpf"
-run realizations-paper study realizations --preset paper --realizations 100 --runs 20 \
-    --filters pf,tl-pf,rpf,tl-rpf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5 --out "$OUT/realizations-paper"
-run realizations-ah study realizations --preset arasaratnam-haykin --realizations 100 --runs 20 \
-    --filters pf,tl-pf,rpf,tl-rpf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5 --out "$OUT/realizations-ah"
 run losses-10000 reproduce --losses-only --runs 10000 --out "$OUT/losses-10000"
 run table2-10000 reproduce --table2-pf-only --runs 10000 --out "$OUT/table2-10000"

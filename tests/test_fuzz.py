@@ -467,8 +467,9 @@ def _serves(name: str, key: str) -> bool:
 
 class StepFuzzer:
     """Messages that decode but name a step the trackers must refuse: k = 0, far in the future,
-    replays of genuine ones, transfers of a source the episode does not have. Only while the episode
-    is alive in the trackers (a replay after its end is not a rejection, just too late)."""
+    replays of genuine ones, a transfer whose sender is not the source its key names. Only while
+    the episode is alive in the trackers (a replay after its end is not a rejection, just too
+    late)."""
 
     def __init__(self, z: zenoh.Session, listen: zenoh.Session, K: int) -> None:
         self.z, self.K = z, K

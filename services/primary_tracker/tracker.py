@@ -109,6 +109,9 @@ class PrimaryTracker:
         return Episode(start, tracker, [s.id for s in cfg.sources])
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
+        if t.sender != sid:  # any source may help, but none may speak for another
+            self.svc.rejects.add(key, "wrong_sender")
+            return
         ep = self.episodes.get(e)
         if ep is None:
             if not self.episodes.hold(e, lambda: self._on_transfer(e, sid, key, t)):
