@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import zenoh
 from livestack import wait_until
@@ -64,6 +65,9 @@ USERS = ROOT / "shared" / "tltrack" / "access" / "users.txt"
 COMPOSE_IDENTITY = {**IDENTITY, "source_tracker_s2": "source-s2", "source_tracker_s3": "source-s3"}
 #: how the host-side tests connect: as the referee (anyone may query the summary)
 HOST_USER = "referee"
+TRACK = ROOT / "examples" / "tracks" / "ais-nyharbor-2020-06-30-mmsi-367370920.csv"
+TRUTH_SQL = "SELECT k, pos FROM truth WHERE episode = ? AND pos IS NOT NULL"
+ESTIMATES_SQL = "SELECT k, pos FROM estimates WHERE episode = ? AND filter = ?"
 
 
 def credentials(user: str) -> dict[str, Any]:
@@ -680,3 +684,31 @@ def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
     assert rejected.get("source/s3/source_tracker") == {}, rejected
     # their health checks (own liveliness token, under their own identity) pass under the ACL
     assert stack.wait_healthy("source_tracker_s2", "source_tracker_s3"), stack.health()
+
+
+def test_a_recorded_track_is_the_truth(stack: Stack) -> None:
+    """README, "Recorded tracks as truth": TLTRACK_SIM_TRUTH_FILE names a track under
+    /config/tracks, where compose mounts examples/tracks; the truth mode is left empty, and the
+    episode is scored against the track (K shortened by TLTRACK_SIM_STEPS)."""
+    steps = 30
+    stack.run_sim(
+        truth="",
+        truth_file=f"/config/tracks/{TRACK.name}",
+        episodes="1",
+        first_run="8",
+        episode_prefix="file",
+        steps=str(steps),
+    )
+    summary = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "file-")), timeout=240)
+    logs = condensed(stack.logs("sensor_sim", "scorer"))
+    assert summary is not None and scored(summary, "file-"), "not scored\n" + logs
+    (episode,) = scored(summary, "file-")
+    assert episode["complete"] and episode["K"] == steps, episode
+    truth = {k: json.loads(pos) for k, pos in stack.sql(TRUTH_SQL, episode["episode"])}
+    tl = {k: json.loads(pos) for k, pos in stack.sql(ESTIMATES_SQL, episode["episode"], "tl-rpf")}
+    assert sorted(truth) == sorted(tl) == list(range(1, steps + 1)), (truth.keys(), tl.keys())
+    # the track, resampled to Ts: the vessel moves a few metres a step, as the file says
+    first, last = np.array(truth[1]), np.array(truth[steps])
+    assert 1.0 < np.linalg.norm(last - first) / (steps - 1) < 15.0, (first, last)
+    error = [np.linalg.norm(np.subtract(tl[k], truth[k])) for k in truth]
+    assert max(error) < 100.0, error  # tracked, against the file's truth
