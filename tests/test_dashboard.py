@@ -373,6 +373,8 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
         assert total is not None and 0 < total / K < 5.0, f"mean latency {total} s"
         lat = f["latency_ms"]
         assert 0 < lat["p50"] <= lat["p95"] <= lat["p99"]
+        stages = f["stages_ms"]  # the page's "p50 by stage" line: where the time goes
+        assert None not in stages.values() and stages["step"] > 0, (name, stages)
     used = scored["tl-rpf"]["steps_with_transfer"]
     assert used == K - 1  # lock-step: every step but the first
     assert value(m, "tltrack_transfer_steps_total", filter="tl-rpf", used="true") == used

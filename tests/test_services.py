@@ -7,7 +7,7 @@ import msgpack
 import numpy as np
 import pytest
 from livestack import estimates, logs, sim_flags, stack, start_all, wait_until
-from tltrack import demo, keys
+from tltrack import demo, keys, latency
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.messages import SCHEMA_VERSION
@@ -39,6 +39,11 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
         assert not any(used[:3]) and sum(used) >= K // 2, used
     else:
         assert used == [False] + [True] * (K - 1)
+    # where the time goes: every estimate timed its stages, and the two hops take time
+    for where in [summary, *summary["filters"].values()]:
+        stages = where["stages_ms"]
+        assert list(stages) == list(latency.STAGES) and None not in stages.values(), stages
+        assert stages["to_tracker"] > 0 and stages["step"] > 0 and stages["to_receiver"] > 0
 
 
 def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+from tltrack import latency
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 from tltrack.models.from_config import PRIMARY, sensor_spec
 
@@ -61,6 +62,7 @@ class Track:
     used: dict[int, bool] = field(default_factory=dict)
     latency_ms: dict[int, float] = field(default_factory=dict)
     step_ms: dict[int, float] = field(default_factory=dict)
+    stages: dict[int, tuple[float, ...]] = field(default_factory=dict)  #: tltrack.latency's
     err: dict[int, float] = field(default_factory=dict)  #: position error where truth is known
     err_sum: float = 0.0
 
@@ -229,6 +231,8 @@ class State:
             tr.used[m.k] = m.transfer_used
             tr.latency_ms[m.k] = (t_recv - m.t_sensor) * 1e3
             tr.step_ms[m.k] = m.step_ms
+            if (split := latency.of(m, t_recv)) is not None:
+                tr.stages[m.k] = split
             update = None
             if (t := ep.truth.get(m.k)) is not None:
                 update = ErrorUpdate(m.filter, m.k, tr.set_error(m.k, t), tr.rmse or 0.0)
@@ -334,6 +338,7 @@ class State:
                     "rmse_k": errs[-1][1] if errs else None,
                     "latency_ms": _percentiles(list(tr.latency_ms.values())),
                     "step_ms": _percentiles(list(tr.step_ms.values())),
+                    "stages_ms": latency.p50(list(tr.stages.values())),
                     "transfer_used": used,
                     "transfer_skipped": len(ks) - used,
                 }

@@ -168,7 +168,7 @@ class PrimaryTracker:
         return sid in self.alive or sid not in self.seen
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
-        t0 = time.perf_counter()
+        t_step, t0 = time.time(), time.perf_counter()
         tl, iso = ep.tracker.step(z, transfers)
         step_ms = (time.perf_counter() - t0) * 1e3
         used = ep.tracker.used_transfer
@@ -186,6 +186,7 @@ class PrimaryTracker:
                 est,
                 used=role_used,
                 recovered=recovered,
+                t_step=t_step,
                 step_ms=step_ms,
             )
             self.svc.publish(keys.primary_estimate(role, e), message)

@@ -23,7 +23,7 @@ CREATE TABLE IF NOT EXISTS truth (
 CREATE TABLE IF NOT EXISTS estimates (
     episode TEXT, filter TEXT, k INTEGER, x TEXT, P TEXT, transfer_used INTEGER,
     t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, pos TEXT, recovered INTEGER,
-    PRIMARY KEY (episode, filter, k));
+    t_received REAL, t_step REAL, PRIMARY KEY (episode, filter, k));
 CREATE TABLE IF NOT EXISTS service_stats (
     operator TEXT, service TEXT, t REAL, stats TEXT, PRIMARY KEY (operator, service));
 """
@@ -38,7 +38,8 @@ class Store:
         self.db.executescript(SCHEMA)
         added = [("truth", "pos", "TEXT"), ("estimates", "pos", "TEXT")]
         added += [("estimates", "recovered", "INTEGER")]
-        for table, column, kind in added:  # a file from before schema 2's fields
+        added += [("estimates", "t_received", "REAL"), ("estimates", "t_step", "REAL")]
+        for table, column, kind in added:  # a file from before these fields
             columns = [row[1] for row in self.db.execute(f"PRAGMA table_info({table})")]
             if column not in columns:
                 self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
@@ -72,8 +73,8 @@ class Store:
     def estimate(self, m: EstimateMsg, t_recv: float) -> bool:
         cur = self.db.execute(
             "INSERT OR IGNORE INTO estimates (episode, filter, k, x, P, transfer_used,"
-            " t_sensor, t_sent, t_recv, step_ms, pos, recovered)"
-            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            " t_sensor, t_sent, t_recv, step_ms, pos, recovered, t_received, t_step)"
+            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 m.episode,
                 m.filter,
@@ -87,6 +88,8 @@ class Store:
                 m.step_ms,
                 json.dumps(m.pos),
                 int(m.recovered),
+                m.t_received,
+                m.t_step,
             ),
         )
         return cur.rowcount == 1

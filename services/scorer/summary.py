@@ -2,7 +2,8 @@
 
 RMSE follows the paper: RMSE(k) = sqrt(mean over episodes of the squared position error at k),
 overall = mean over k. Latency is end to end: sensor timestamp to the estimate's arrival here
-(meaningful on one host; across hosts it needs synchronised clocks).
+(meaningful on one host; across hosts it needs synchronised clocks). ``stages_ms`` splits it into
+the p50 of each stage of :mod:`tltrack.latency`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from collections import defaultdict
 from typing import Any
 
 import numpy as np
+from tltrack import latency
 from tltrack.services.scorer.store import Store
 
 
@@ -34,17 +36,36 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
         for ep, k, pos in store.rows("SELECT episode, k, pos FROM truth WHERE pos IS NOT NULL")
     }
     sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
-    latency: dict[str, list[float]] = defaultdict(list)
+    end_to_end: dict[str, list[float]] = defaultdict(list)
+    split: dict[str, list[tuple[float, ...]]] = defaultdict(list)
     used: dict[str, int] = defaultdict(int)
     recoveries: dict[str, int] = defaultdict(int)
     seen: dict[str, set[tuple[str, int]]] = defaultdict(set)
-    for ep, name, k, pos, tu, rec, t_sensor, t_recv in store.rows(
-        "SELECT episode, filter, k, pos, transfer_used, recovered, t_sensor, t_recv FROM estimates"
+    for (
+        ep,
+        name,
+        k,
+        pos,
+        tu,
+        rec,
+        t_sensor,
+        t_recv,
+        t_sent,
+        step_ms,
+        t_received,
+        t_step,
+    ) in store.rows(
+        "SELECT episode, filter, k, pos, transfer_used, recovered, t_sensor, t_recv, t_sent,"
+        " step_ms, t_received, t_step FROM estimates"
     ):
         if ep not in K_of:
             continue
         seen[name].add((ep, k))
-        latency[name].append((t_recv - t_sensor) * 1e3)
+        end_to_end[name].append((t_recv - t_sensor) * 1e3)
+        if t_received is not None and t_step is not None:
+            split[name].append(
+                latency.stages(t_sensor, t_received, t_step, step_ms, t_sent, t_recv)
+            )
         used[name] += tu
         recoveries[name] += rec or 0
         if (ep, k) in truth and pos is not None:
@@ -62,9 +83,10 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
             "gaps": expected - len(seen[name]),
             "steps_with_transfer": used[name],
             "recoveries": recoveries[name],
-            "latency_ms": _percentiles(latency[name]),
+            "latency_ms": _percentiles(end_to_end[name]),
+            "stages_ms": latency.p50(split[name]),
         }
-    everything = [v for lst in latency.values() for v in lst]
+    everything = [v for lst in end_to_end.values() for v in lst]
     rejected: dict[str, dict[str, int]] = {}
     dropped = 0
     for operator, service, _t, stats in store.rows("SELECT * FROM service_stats"):
@@ -78,6 +100,7 @@ def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]
         ],
         "filters": filters,
         "latency_ms": _percentiles(everything),
+        "stages_ms": latency.p50([v for rows in split.values() for v in rows]),
         "messages": {
             "rejected": rejected,
             "rejected_total": sum(sum(v.values()) for v in rejected.values()),

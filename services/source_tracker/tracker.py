@@ -94,7 +94,7 @@ class SourceTracker:
 
     def _step(self, e: str, ep: Episode, z: Measurement) -> None:
         k, t_sensor = z.k, z.t_sensor
-        t0 = time.perf_counter()
+        t_step, t0 = time.time(), time.perf_counter()
         est, eta = ep.tracker.step(z)
         step_ms = (time.perf_counter() - t0) * 1e3
         sid = self.s.source_id
@@ -122,6 +122,7 @@ class SourceTracker:
             est,
             used=False,
             recovered=recovered,
+            t_step=t_step,
             step_ms=step_ms,
         )
         self.svc.publish(keys.source_estimate(sid, e), message)

@@ -26,6 +26,7 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    PrivateAttr,
     ValidationError,
     field_validator,
     model_validator,
@@ -165,6 +166,17 @@ class Message(BaseModel):
     sender: Id
     k: Step
     t_sensor: Timestamp
+    #: time.time() when this process received the message; set on receipt, never on the wire
+    _received_at: float | None = PrivateAttr(default=None)
+
+    @property
+    def received_at(self) -> float | None:
+        return self._received_at
+
+    def received(self, t: float) -> Message:
+        """This message, stamped with the local time it arrived (the latency's stages)."""
+        self._received_at = t
+        return self
 
     @field_validator("schema_version")
     @classmethod
@@ -248,6 +260,8 @@ class EstimateMsg(Message):
     recovered: bool = False  #: the filter had lost the track and was reinitialised at this step
     t_sent: Timestamp
     step_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    t_received: Timestamp | None = None  #: when the tracker received z_k (the latency's stages)
+    t_step: Timestamp | None = None  #: when the step began
 
     @field_validator("x")
     @classmethod

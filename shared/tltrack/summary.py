@@ -42,9 +42,13 @@ def table(summary: dict[str, Any]) -> Table:
     m = summary.get("messages", {})
     lat = summary.get("latency_ms", {})
     access = summary.get("access_control")
+    stages = summary.get("stages_ms") or {}
+    where = ", ".join(f"{name} {_ms(v)}" for name, v in stages.items() if v is not None)
     t.caption = (
         f"latency p50/p95/p99: {_ms(lat.get('p50'))}/{_ms(lat.get('p95'))}/"
-        f"{_ms(lat.get('p99'))} ms; rejected {m.get('rejected_total', 0)}, "
+        f"{_ms(lat.get('p99'))} ms"
+        + (f" (p50 by stage, ms: {where})" if where else "")
+        + f"; rejected {m.get('rejected_total', 0)}, "
         f"dropped {m.get('dropped', 0)}, missing estimates {m.get('missing_estimates', 0)}"
         + ("" if access is None else f"; access control {'on' if access else 'OFF'}")
     )

@@ -106,9 +106,11 @@ def estimate_message(
     *,
     used: bool,
     recovered: bool,
+    t_step: float,
     step_ms: float,
 ) -> EstimateMsg:
-    """What a tracker publishes for filter ``name``'s estimate at the step of ``z``."""
+    """What a tracker publishes for filter ``name``'s estimate at the step of ``z``, begun at
+    ``t_step``; with when ``z`` arrived, these time each stage of the latency."""
     return EstimateMsg(
         episode=z.episode,
         sender=sender,
@@ -122,6 +124,8 @@ def estimate_message(
         recovered=recovered,
         t_sent=time.time(),
         step_ms=step_ms,
+        t_received=z.received_at,
+        t_step=t_step,
     )
 
 

@@ -350,12 +350,14 @@ def decode_received(
     if not item.is_put:
         return None
     try:
-        return decode(item.payload, expected_type)
+        msg = decode(item.payload, expected_type)
     except MessageRejected as err:
         if rejects is not None:
             rejects.record(item.key, err)
         log.warning("rejected a payload on %s: %s", item.key, err)
         return None
+    msg.received(item.t_recv)
+    return msg
 
 
 # ---- publishing -------------------------------------------------------------------------------

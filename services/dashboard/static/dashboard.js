@@ -321,6 +321,7 @@ function fillFilters(ep, colors) {
     const td = el("td", "no estimates yet", "empty");
     td.colSpan = 11;
     tr.append(td);
+    fillStages(undefined);
     return;
   }
   for (const f of ep.filters) {
@@ -337,6 +338,23 @@ function fillFilters(ep, colors) {
       el("td", fmt(f.latency_ms.p99, 1)), el("td", fmt(f.step_ms.p50, 1)),
       el("td", tl ? f.transfer_used : "–"), el("td", tl ? f.transfer_skipped : "–"));
   }
+  fillStages(ep.filters.find((f) => f.role === "tl"));
+}
+
+const STAGE_LABEL = {
+  to_tracker: "sensor → tracker", wait: "wait", step: "step", publish: "publish",
+  to_receiver: "tracker → here",
+};
+
+// Where the TL estimate's latency goes, stage by stage (p50 of each, tltrack.latency).
+function fillStages(f) {
+  const parts = f && f.stages_ms
+    ? Object.entries(f.stages_ms).filter(([, v]) => v !== null)
+      .map(([s, v]) => `${STAGE_LABEL[s] || s} ${fmt(v, 2)}`)
+    : [];
+  $("stages").textContent = parts.length
+    ? `TL estimate, p50 by stage [ms]: ${parts.join(" · ")}`
+    : "";
 }
 
 function age(s) {

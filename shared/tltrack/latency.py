@@ -1,0 +1,48 @@
+"""An estimate's end-to-end latency, stage by stage, so that a user can see where the time goes.
+
+Every estimate carries the sensor's timestamp ``t_sensor``, when its tracker received z_k
+(``t_received``), when the step began (``t_step``), the step's duration (``step_ms``) and when it
+was published (``t_sent``); its receiver adds its own arrival time ``t_recv``. The stages (ms):
+
+- ``to_tracker``: the sensor's timestamp to the tracker's receipt of z_k (a routed hop);
+- ``wait``: receipt to the step's start (the queue, and a primary's wait for the transfer);
+- ``step``: the filter step (a primary steps its TL filter and the isolated twin together);
+- ``publish``: the step's end to the estimate's publication;
+- ``to_receiver``: publication to arrival at the scorer or the dashboard (a routed hop).
+
+They add up to ``t_recv - t_sensor``. Across hosts the hops need synchronised clocks.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from tltrack.messages import EstimateMsg
+
+STAGES = ("to_tracker", "wait", "step", "publish", "to_receiver")
+
+
+def stages(
+    t_sensor: float, t_received: float, t_step: float, step_ms: float, t_sent: float, t_recv: float
+) -> tuple[float, float, float, float, float]:
+    """One estimate's latency in :data:`STAGES` order, in ms."""
+    to_tracker = (t_received - t_sensor) * 1e3
+    wait = (t_step - t_received) * 1e3
+    publish = (t_sent - t_step) * 1e3 - step_ms
+    return to_tracker, wait, step_ms, publish, (t_recv - t_sent) * 1e3
+
+
+def of(m: EstimateMsg, t_recv: float) -> tuple[float, float, float, float, float] | None:
+    """The stages of estimate ``m`` received at ``t_recv``; None if its tracker did not say."""
+    if m.t_received is None or m.t_step is None:
+        return None
+    return stages(m.t_sensor, m.t_received, m.t_step, m.step_ms, m.t_sent, t_recv)
+
+
+def p50(rows: Sequence[tuple[float, ...]]) -> dict[str, float | None]:
+    """Each stage's median over ``rows`` of :func:`stages`."""
+    if not rows:
+        return {s: None for s in STAGES}
+    return dict(zip(STAGES, (float(v) for v in np.median(np.array(rows), axis=0)), strict=True))
