@@ -40,7 +40,7 @@ def _replay(shift: int) -> np.ndarray:
             P_eta=eta.cov[0],
         )
         transfers = {sid: made[k]} if k in made and k > 1 else {}
-        tl, _ = prim.step(z[PRIMARY], transfers)
+        tl = prim.step(z[PRIMARY], transfers)
         out.append(tl.mean[0])
     return np.array(out)
 
@@ -87,7 +87,7 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
         z = Measurement(
             episode="e", sender="t", k=k, t_sensor=0.0, sensor=PRIMARY, z=run.z[PRIMARY][k - 1]
         )
-        tl, _ = prim.step(z, transfers)
+        tl = prim.step(z, transfers)
         out.append(tl.mean[0])
     engine = trace_run(cfg, ["robust-tl-pf"], run=0)["robust-tl-pf"]
     np.testing.assert_allclose(np.array(out), engine, rtol=0, atol=1e-9)

@@ -485,7 +485,7 @@ def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_clust
     local = rep.run_all(
         rep.table2_pf_jobs(rep.base_config("paper", "fixed", runs, 0)), tmp_path / "local"
     )
-    assert set(from_container) == set(local) == {f"s2_n{n}" for n in rep.PARTICLES}
+    assert set(from_container) == set(local) == {rep.s2_label(4, n) for n in rep.PARTICLES}
     for label, doc in local.items():
         same(from_container[label], doc["filters"])
         on_host = json.loads((tmp_path / "host" / label / "results.json").read_text())

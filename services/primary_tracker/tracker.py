@@ -17,6 +17,7 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import PARTICLE_KINDS, Config, FilterKind
+from tltrack.filters.base import Estimate
 from tltrack.filters.decision import NotComparableError
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
@@ -140,6 +141,7 @@ class PrimaryTracker:
                 log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
                 for k in skipped:  # on the clock, but nothing published: a gap, not a guess
                     ep.tracker.step(None, ep.transfers.pop(k, {}))
+                    ep.tracker.step_twin()
                     self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 now = time.monotonic()
@@ -168,33 +170,49 @@ class PrimaryTracker:
         return sid in self.alive or sid not in self.seen
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
+        """The TL estimate goes out first; the isolated twin, there only for comparison, after."""
+        tracker = ep.tracker
         t_step, t0 = time.time(), time.perf_counter()
-        tl, iso = ep.tracker.step(z, transfers)
-        step_ms = (time.perf_counter() - t0) * 1e3
-        used = ep.tracker.used_transfer
-        tl_recovered, iso_recovered = ep.tracker.recovered
-        for role, name, est, role_used, recovered in (
-            ("tl", ep.tracker.tl_name, tl, used, tl_recovered),
-            ("isolated", ep.tracker.iso_name, iso, False, iso_recovered),
-        ):
-            message = partial(
-                estimate_message,
-                z,
-                keys.PRIMARY,
-                name,
-                ep.tracker.layout,
-                est,
-                used=role_used,
-                recovered=recovered,
-                t_step=t_step,
-                step_ms=step_ms,
-            )
-            self.svc.publish(keys.primary_estimate(role, e), message)
-            self.svc.count("recoveries" if recovered else "steps_on_track")
+        tl = tracker.step(z, transfers)
+        tl_ms = (time.perf_counter() - t0) * 1e3
+        used = tracker.used_transfer
+        self._publish(e, ep, z, "tl", tl, used, tracker.recovered[0], t_step, tl_ms)
+        t_twin, t0 = time.time(), time.perf_counter()
+        iso = tracker.step_twin()
+        iso_ms = (time.perf_counter() - t0) * 1e3
+        iso_recovered = tracker.recovered[1]
+        self._publish(e, ep, z, "isolated", iso, False, iso_recovered, t_twin, iso_ms)
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
-        if ep.tracker.rolled_back:
+        if tracker.rolled_back:
             self.svc.count("rollbacks_to_isolated")
+
+    def _publish(
+        self,
+        e: str,
+        ep: Episode,
+        z: Measurement,
+        role: str,
+        est: Estimate,
+        used: bool,
+        recovered: bool,
+        t_step: float,
+        step_ms: float,
+    ) -> None:
+        message = partial(
+            estimate_message,
+            z,
+            keys.PRIMARY,
+            ep.tracker.tl_name if role == "tl" else ep.tracker.iso_name,
+            ep.tracker.layout,
+            est,
+            used=used,
+            recovered=recovered,
+            t_step=t_step,
+            step_ms=step_ms,
+        )
+        self.svc.publish(keys.primary_estimate(role, e), message)
+        self.svc.count("recoveries" if recovered else "steps_on_track")
 
 
 def main(argv: list[str] | None = None) -> None:

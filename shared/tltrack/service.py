@@ -118,8 +118,8 @@ class Service:
         try:
             message = msg() if callable(msg) else msg
             pub = self._pubs.get(key)
-            if pub is None:
-                pub = self._pubs[key] = Publisher(self.session, key)
+            if pub is None:  # express: one message a step has nothing to batch with, so send now
+                pub = self._pubs[key] = Publisher(self.session, key, express=True)
             pub.put(message)
         except (ValidationError, ValueError, zenoh.ZError) as err:
             self.count("publish_failed")
