@@ -140,10 +140,15 @@ def distributions(
     ylabel: str,
     title: str,
 ) -> Path:
-    """A box per sample set (whiskers 5-95 %), with a reference value as a cross where known."""
+    """A box per sample set (whiskers 5-95 %), with a reference value as a cross where known; on
+    a log scale when the values span more than a decade (a lost track's RMSE is in the km)."""
     names = list(samples)
     fig, ax = plt.subplots(figsize=(max(7.0, 0.9 * len(names)), 4.5))
     ax.boxplot([samples[n] for n in names], whis=(5, 95), showfliers=True)
+    values = np.concatenate([np.asarray(samples[n], dtype=float) for n in names])
+    values = values[np.isfinite(values) & (values > 0)]
+    if values.size and values.max() > 10 * values.min():
+        ax.set_yscale("log")
     for j, n in enumerate(names, start=1):
         ref = reference.get(n)
         if ref is not None:
