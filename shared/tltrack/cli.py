@@ -300,14 +300,18 @@ def reproduce(
 @app.command()
 def router(
     listen: Annotated[list[str] | None, typer.Option(help="endpoint(s) to listen on")] = None,
+    connect: Annotated[
+        list[str] | None, typer.Option(help="other routers to dial (redialled when lost)")
+    ] = None,
 ) -> None:
     """Run a Zenoh router (the Python package in router mode) until Ctrl-C or SIGTERM.
 
-    Example: `tltrack router --listen tcp/0.0.0.0:7447`
+    Example: `tltrack router --listen tcp/0.0.0.0:7447`; one operator's router in the federated
+    topology: `tltrack router --listen tcp/0.0.0.0:7448 --connect tcp/referee.example.org:7447`
     """
     from tltrack.transport import ZenohSettings, run_router
 
-    run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings())
+    run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)
 
 
 @app.command(
