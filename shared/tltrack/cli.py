@@ -14,6 +14,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from tltrack.config import Config, ConfigError, FilterKind
+from tltrack.topology import Kind as TopologyKind
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -339,14 +340,19 @@ def demo(
     ] = False,
     port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
     host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
+    topology: Annotated[
+        TopologyKind, typer.Option(help="a router per operator (federated), or one for all")
+    ] = "federated",
 ) -> None:
-    """Start the router, the scorer, the trackers and sensor_sim on loopback, run one episode,
-    print the summary.
+    """Start the routers, the scorer, the trackers, the sensors and sensor_sim on loopback, run
+    one episode, print the summary.
 
     Without --config the episode is the arasaratnam-haykin preset with a fixed truth, K = 100,
     N = 6000 (the values in brackets); with it, the file's values, unless an option overrides
-    them. The router enforces the package's access control; every service runs as its
-    operator. Any stop signal (or the death of this process) stops every process it started.
+    them. Federated: one router per operator (referee, primary, each source), each letting out
+    only what its owner shares; single: one router for all. The routers enforce the package's
+    access control; every service runs as its operator. Any stop signal (or the death of this
+    process) stops every process it started.
     """
     from tltrack import demo as d
 
@@ -362,7 +368,7 @@ def demo(
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:
         with d.stop_on_signals():
-            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host)
+            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host, topology)
     except d.Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
@@ -382,18 +388,25 @@ def _run_demo(
     serve: bool,
     port: int,
     host: str,
+    kind: TopologyKind = "federated",
 ) -> dict[str, Any]:
-    """One episode on a fresh stack; the scorer's summary, with ``access_control`` set."""
+    """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
+    ``topology`` set."""
+    from tltrack import topology
     from tltrack.filters.warm import warm_up
     from tltrack.summary import print_summary
 
-    endpoint = f"tcp/127.0.0.1:{d.free_port()}"
+    topo = topology.build(kind, [s.id for s in cfg.sources])
+    endpoint = topo.referee.endpoint
     db = out / "scorer.sqlite"
     for suffix in ("", "-wal", "-shm"):
         Path(f"{db}{suffix}").unlink(missing_ok=True)
-    console.print(f"router {endpoint} (access control: {d.ACCESS_DIR}); logs in {out / 'logs'}")
+    console.print(
+        f"{kind} topology, routers: {topology.describe(topo)} (access control: "
+        f"{d.ACCESS_DIR}); logs in {out / 'logs'}"
+    )
     warm_up()  # compile the kernels once here, not in several services at once
-    with d.Stack(endpoint, out / "logs", secure=True) as stack:
+    with d.Stack(endpoint, out / "logs", secure=True, topology=topo) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         wait_for = stack.start_trackers(cfg)
@@ -425,7 +438,8 @@ def _run_demo(
         if summary is None:
             console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
             raise typer.Exit(1)
-        summary["access_control"] = True  # the router enforced the ACL; every service logged in
+        summary["access_control"] = True  # the routers enforced the ACL; every service logged in
+        summary["topology"] = kind
         print_summary(summary)
         if serve:
             console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")

@@ -116,6 +116,18 @@ def federated(source_ids: list[str], host: str = "127.0.0.1") -> Topology:
     return Topology("federated", {r.operator: r for r in routers})
 
 
+def build(kind: Kind, source_ids: list[str]) -> Topology:
+    """``kind`` on loopback, on free ports."""
+    if kind == "federated":
+        return federated(source_ids)
+    return single(f"tcp/127.0.0.1:{free_port()}")
+
+
+def describe(topology: Topology) -> str:
+    """One line: which router listens where."""
+    return ", ".join(f"{r.name} {r.endpoint}" for r in topology.routers.values())
+
+
 # ---- per-router configuration -------------------------------------------------------------------
 
 
