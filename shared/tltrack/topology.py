@@ -79,6 +79,8 @@ class Router:
 class Topology:
     kind: Kind
     routers: dict[str, Router] = field(default_factory=dict)  #: by operator
+    #: (dialler, dialled) -> the endpoint to dial instead of the dialled router's own (a relay)
+    via: dict[tuple[str, str], str] = field(default_factory=dict)
 
     @property
     def referee(self) -> Router:
@@ -176,5 +178,8 @@ def configure(topology: Topology, router: Router, out: Path) -> dict[str, str]:
 
 def router_argv(topology: Topology, router: Router) -> list[str]:
     """``tltrack router``'s arguments for ``router``."""
-    dials = [f"--connect={topology.routers[op].endpoint}" for op in router.dials]
+    dials = [
+        f"--connect={topology.via.get((router.operator, op), topology.routers[op].endpoint)}"
+        for op in router.dials
+    ]
     return ["router", f"--listen={router.endpoint}", *dials]

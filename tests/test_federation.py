@@ -1,0 +1,129 @@
+"""The federated topology with real routers and processes: a router per operator, and a relay on
+every link between routers that keeps each byte it forwards (tests/relay.py).
+
+The sentinels are the raw measurements themselves: msgpack encodes each component of z as the
+9 bytes 0xcb + its big-endian float64, random enough to be unique to one operator's sensor.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+from livestack import estimates, logs, sim_flags, wait_until
+from relay import Relay
+from tltrack import demo, keys, topology
+from tltrack.config import Config, make_config
+from tltrack.engine.montecarlo import trace_run
+from tltrack.engine.scenario import measurements, truth
+from tltrack.transport import Subscriber
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
+
+#: (dialler, dialled): every link between routers
+LINKS = [("source/s1", "primary"), ("source/s1", keys.REFEREE), ("primary", keys.REFEREE)]
+K, N = 30, 500
+SIM = dict(preset="arasaratnam-haykin", truth="fixed", seed=7)
+
+
+def config(steps: int = K) -> Config:
+    return make_config(**SIM, K=steps, particles=N, recovery=True)  # recovery: the trackers'
+
+
+def sentinels(values: np.ndarray) -> set[bytes]:
+    """How each value travels inside a message."""
+    return {msgpack.packb(float(v)) for v in np.ravel(values)}
+
+
+def found(patterns: set[bytes], wire: bytes) -> int:
+    return sum(p in wire for p in patterns)
+
+
+@contextlib.contextmanager
+def federation(tmp: Path) -> Iterator[tuple[demo.Stack, dict[tuple[str, str], Relay]]]:
+    """A federated stack whose routers dial each other through relays (not yet started)."""
+    topo = topology.federated(["s1"])
+    with contextlib.ExitStack() as stack:
+        relays = {
+            link: stack.enter_context(Relay(topo.routers[link[1]].endpoint)) for link in LINKS
+        }
+        topo = dataclasses.replace(topo, via={link: r.endpoint for link, r in relays.items()})
+        s = stack.enter_context(demo.Stack(topo.referee.endpoint, tmp / "logs", topology=topo))
+        yield s, relays
+
+
+def run_episode(
+    s: demo.Stack,
+    db: Path,
+    steps: int,
+    pace: float,
+    primary_env: dict[str, str] | None = None,
+    sensor_env: dict[str, str] | None = None,
+) -> None:
+    """The scorer, the trackers and the sensors, then sensor_sim (routers already started)."""
+    s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
+    s.start_service("primary_tracker", env=primary_env)
+    s.start_service("source_tracker", identity="source-s1")
+    cfg = config(steps)
+    s.start_service("sensor_primary", service="sensor", identity="primary")
+    s.start_service(
+        "sensor_s1",
+        service="sensor",
+        identity="source-s1",
+        env={"TLTRACK_SENSOR_SENSOR": "s1", **(sensor_env or {})},
+    )
+    wait = ["primary:primary_tracker", "referee:scorer", "source/s1:source_tracker"]
+    wait += ["primary:sensor", "source/s1:sensor"]
+    s.start_service(
+        "sensor_sim",
+        *sim_flags(steps, N, pace=pace),
+        env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait), "TLTRACK_SIM_WAIT_TIMEOUT_S": "60"},
+    )
+    assert cfg.K == steps
+
+
+def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(tmp_path):
+    db = tmp_path / "scorer.sqlite"
+    with (
+        federation(tmp_path) as (s, relays),
+        Relay(s.topology.routers["source/s1"].endpoint) as tap,
+    ):
+        s.start_router()
+        # a tap between the source's sensor and its own router: the sentinels do travel there
+        run_episode(
+            s,
+            db,
+            K,
+            0.0,
+            primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"},
+            sensor_env={"TLTRACK_ZENOH_ENDPOINTS": json.dumps([tap.endpoint])},
+        )
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        wire = {link: r.bytes() for link, r in relays.items()}
+        local = tap.bytes()
+    cfg = config()
+    x = truth(cfg, 0)
+    raw = {sid: sentinels(measurements(cfg, 0, x, sid)) for sid in ("primary", "s1")}
+    assert found(raw["s1"], local) == len(raw["s1"]), "the sentinels are not what travels"
+    for link, data in wire.items():
+        assert len(data) > 10_000, link  # the link carried the episode
+        assert found(raw["s1"], data) == 0, f"source s1's raw data on {link}"
+        assert found(raw["primary"], data) == 0, f"the primary's raw data on {link}"
+        assert found(sentinels(x[1:]), data) == 0, f"the truth on {link}"
+    assert b"\xa8transfer" in wire["source/s1", "primary"], "no transfer on the source's link"
+    assert b"\xa8transfer" not in wire["source/s1", keys.REFEREE]
+    assert b"\xa8transfer" not in wire["primary", keys.REFEREE]
+
+    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
+    live = estimates(db)
+    for name in ("tl-rpf", "rpf", "source-rpf"):
+        got = np.array([live[name][k][0] for k in range(1, K + 1)])
+        np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)
+    assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
