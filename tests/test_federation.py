@@ -16,13 +16,12 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
-from livestack import estimates, logs, sim_flags, wait_until
+from livestack import estimates, logs, sim_flags
 from relay import Relay
 from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
-from tltrack.transport import Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -85,7 +84,7 @@ def run_episode(
         *sim_flags(steps, N, pace=pace),
         env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait), "TLTRACK_SIM_WAIT_TIMEOUT_S": "60"},
     )
-    assert cfg.K == steps
+    assert steps == cfg.K
 
 
 def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(tmp_path):
