@@ -16,12 +16,13 @@ from pathlib import Path
 import msgpack
 import numpy as np
 import pytest
-from livestack import estimates, logs, sim_flags
+from livestack import estimates, logs, sim_flags, wait_until
 from relay import Relay
 from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
+from tltrack.transport import Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -126,3 +127,92 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
         got = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)
     assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
+
+
+def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything(tmp_path):
+    """The primary's router runs without access control, and a client on it subscribes to every
+    key: it still gets none of the source's raw data, since the source's router never lets it
+    out."""
+    db = tmp_path / "scorer.sqlite"
+    open_acl = tmp_path / "allow-everything.json5"
+    open_acl.write_text('{ enabled: false, default_permission: "allow" }')
+    with federation(tmp_path) as (s, relays):
+        topo = s.topology
+        for r in topo.routers.values():
+            if r.operator != "primary":
+                s.start_operator_router(r.operator)
+                continue
+            env = topology.configure(topo, r, tmp_path / "routers")
+            env["TLTRACK_ZENOH_ACCESS_CONTROL_FILE"] = str(open_acl)
+            s.start(f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(topo, r)], env)
+        with (
+            demo.client(topo.routers["primary"].endpoint, "primary") as z,
+            Subscriber(z, [keys.ALL, "tltrack/source/s1/meas/*"]) as sub,
+        ):
+            run_episode(s, db, K, 0.0)
+            assert s.wait("sensor_sim", 120) == 0, logs(s)
+            assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+            got = [item.key for item in sub.drain()]
+        wire = relays["source/s1", "primary"].bytes()
+    cfg = config()
+    assert not [k for k in got if k.startswith("tltrack/source/s1/meas/")]
+    assert any(k.startswith("tltrack/source/s1/transfer/") for k in got), "no transfer seen"
+    assert any(k.startswith("tltrack/primary/meas/") for k in got), "the open router is not open"
+    assert found(sentinels(measurements(cfg, 0, truth(cfg, 0), "s1")), wire) == 0
+
+
+FAULT_K = 200
+
+
+def _transfer_use(db: Path) -> dict[int, bool]:
+    return {k: used for k, (_x, used) in estimates(db).get("tl-rpf", {}).items()}
+
+
+def _reached(db: Path, k: int, name: str = "tl-rpf") -> bool:
+    """Whether ``name``'s estimates reached step ``k``."""
+    return max(estimates(db).get(name, {}), default=0) >= k
+
+
+@pytest.mark.parametrize("fault", ["link-cut", "primary-router-restarts", "source-router-gone"])
+def test_faults_between_routers(tmp_path, fault):
+    """Cut the source-primary link (the primary steps isolated, then transfer resumes), restart
+    the primary's router (its services reconnect), or stop the source's router for good (the
+    primary carries on alone); asserted on the scorer's record."""
+    db = tmp_path / "scorer.sqlite"
+    with federation(tmp_path) as (s, relays):
+        s.start_router()
+        # The primary's router still knows the source's router, through the referee's (the
+        # routers share one link-state graph), so the source's token outlives a cut link: the
+        # primary waits deadline_ms for each transfer, which the referee's router drops. Keep
+        # that wait under the step period.
+        run_episode(s, db, FAULT_K, 20.0, primary_env={"TLTRACK_PRIMARY_DEADLINE_MS": "20"})
+        assert wait_until(lambda: _reached(db, 30), 90), logs(s)
+        if fault == "link-cut":
+            relays["source/s1", "primary"].cut()
+        else:
+            s.kill("router_primary" if fault == "primary-router-restarts" else "router_source-s1")
+        hit = max(_transfer_use(db))
+        # the clock: the tracker that the fault leaves in reach of the referee
+        clock = "source-rpf" if fault == "primary-router-restarts" else "rpf"
+        assert wait_until(lambda: _reached(db, hit + 30, clock), 60), logs(s)
+        if fault == "link-cut":
+            relays["source/s1", "primary"].restore()
+        elif fault == "primary-router-restarts":
+            s.start_operator_router("primary")
+        back = max(_transfer_use(db), default=hit)
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+    used = _transfer_use(db)
+    assert all(used[k] for k in range(2, hit - 1)), "transfer unused before the fault"
+    during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
+    if fault == "primary-router-restarts":  # its sensor had no clock: gaps, not estimates
+        assert not during, "the primary stepped while its router was down"
+    else:
+        assert during and not any(during), "transfer used while the source was out of reach"
+    tail = [used.get(k, False) for k in range(FAULT_K - 20, FAULT_K + 1)]
+    if fault == "source-router-gone":
+        assert sorted(used) == list(range(1, FAULT_K + 1)), "the primary missed steps"
+        assert not any(tail), "transfer after the source's router went away"
+    else:
+        assert back < FAULT_K - 25, "the fault outlasted the episode"
+        assert all(tail), f"transfer did not resume: {tail}"

@@ -16,6 +16,7 @@ know that name and password (``access/routers/users.txt``), beside its own servi
 
 from __future__ import annotations
 
+import contextlib
 import socket
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,9 +32,16 @@ ROUTERS_DIR = ACCESS_DIR / "routers"
 
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+    return free_ports(1)[0]
+
+
+def free_ports(n: int) -> list[int]:
+    """``n`` distinct free ports (each held until all are found, so none is handed out twice)."""
+    with contextlib.ExitStack() as held:
+        socks = [held.enter_context(socket.socket()) for _ in range(n)]
+        for s in socks:
+            s.bind(("127.0.0.1", 0))
+        return [int(s.getsockname()[1]) for s in socks]
 
 
 def identity_operator(identity: str) -> str:
@@ -103,16 +111,13 @@ def single(endpoint: str) -> Topology:
 
 def federated(source_ids: list[str], host: str = "127.0.0.1") -> Topology:
     """A router per operator on ``host``, each on a free port."""
-
-    def at() -> str:
-        return f"tcp/{host}:{free_port()}"
-
+    at = [f"tcp/{host}:{port}" for port in free_ports(2 + len(source_ids))]
     routers = [
-        Router(keys.REFEREE, at()),
-        Router(keys.PRIMARY, at(), (keys.REFEREE,)),
+        Router(keys.REFEREE, at[0]),
+        Router(keys.PRIMARY, at[1], (keys.REFEREE,)),
         *(
-            Router(keys.source_operator(sid), at(), (keys.PRIMARY, keys.REFEREE))
-            for sid in source_ids
+            Router(keys.source_operator(sid), ep, (keys.PRIMARY, keys.REFEREE))
+            for sid, ep in zip(source_ids, at[2:], strict=True)
         ),
     ]
     return Topology("federated", {r.operator: r for r in routers})
