@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, get_args
+from typing import Annotated, Any, Literal, get_args
 
 import typer
 from rich.console import Console
@@ -537,8 +537,13 @@ def bench_live(
         str, typer.Option(help="step rates to try, ascending")
     ] = "100,200,300,500,800",
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
+    topology: Annotated[
+        Literal["federated", "single", "both"],
+        typer.Option(help="a router per operator (federated), one for all (single), or both"),
+    ] = "both",
 ) -> None:
-    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate.
+    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate, in
+    either topology or both (one entry each under `topologies`).
 
     Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
     """
@@ -547,7 +552,10 @@ def bench_live(
 
     try:
         with stop_on_signals():
-            result = livebench.run(particles, pace, steps, [float(r) for r in rates.split(",")])
+            kinds = get_args(TopologyKind) if topology == "both" else (topology,)
+            result = livebench.run(
+                particles, pace, steps, [float(r) for r in rates.split(",")], kinds
+            )
     except Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
