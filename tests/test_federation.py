@@ -10,6 +10,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,11 +20,12 @@ import numpy as np
 import pytest
 from livestack import estimates, logs, sim_flags, wait_until
 from relay import Relay
+from security_helpers import make_certs, session
 from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
-from tltrack.transport import Subscriber
+from tltrack.transport import Publisher, Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -216,3 +219,55 @@ def test_faults_between_routers(tmp_path, fault):
     else:
         assert back < FAULT_K - 25, "the fault outlasted the episode"
         assert all(tail), f"transfer did not resume: {tail}"
+
+
+def _tls_env(ca: Path, cert: Path) -> dict[str, str]:
+    return {
+        "TLTRACK_ZENOH_TLS_ROOT_CA": str(ca),
+        "TLTRACK_ZENOH_TLS_CERT": str(cert),
+        "TLTRACK_ZENOH_TLS_KEY": str(cert.with_suffix(".key")),
+        "TLTRACK_ZENOH_TLS_MTLS": "true",
+    }
+
+
+@pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")
+@pytest.mark.parametrize("issuer", ["operators-ca", "another-ca"])
+def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_path, issuer):
+    """The referee's router listens with mutual TLS; the primary's router dials it with a
+    certificate from the operators' CA (episodes flow) or from another CA (refused)."""
+    certs = make_certs(tmp_path / "certs", names="sensor router-primary")
+    rogue = make_certs(tmp_path / "rogue", names="router-primary")
+    port = demo.free_port()
+    topo = dataclasses.replace(
+        topology.federated([]),
+        via={("primary", keys.REFEREE): f"tls/localhost:{port}"},
+    )
+    ref = dataclasses.replace(topo.referee, endpoint=f"tls/127.0.0.1:{port}")
+    topo = dataclasses.replace(topo, routers={**topo.routers, keys.REFEREE: ref})
+    signer = certs if issuer == "operators-ca" else rogue
+    with demo.Stack(topo.referee.endpoint, tmp_path / "logs", topology=topo) as s:
+        for r in topo.routers.values():
+            env = topology.configure(topo, r, tmp_path / "routers")
+            cert = certs / "router.pem" if r is ref else signer / "router-primary.pem"
+            env |= _tls_env(certs / "ca.pem", cert)
+            s.start(f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(topo, r)], env)
+        tls = {
+            "tls_root_ca": certs / "ca.pem",
+            "tls_cert": certs / "sensor.pem",
+            "tls_key": certs / "sensor.key",
+            "tls_mtls": True,
+        }
+        with (
+            session(f"tls/localhost:{port}", "sensor", connect_timeout_ms=20_000, **tls) as ref_z,
+            demo.client(topo.routers["primary"].endpoint, "primary") as prim_z,
+            Subscriber(prim_z, keys.EPISODES) as episodes,
+            Publisher(ref_z, keys.episode("e1")) as pub,
+        ):
+            deadline = time.monotonic() + 8
+            while time.monotonic() < deadline and not episodes.received:
+                pub.put(b"an episode announcement")
+                time.sleep(0.2)
+            received = episodes.received
+        router_log = (s.logs / "router_referee.log").read_text()
+    assert router_log.count("listening on") == 1
+    assert (received > 0) is (issuer == "operators-ca"), received
