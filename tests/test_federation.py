@@ -142,12 +142,8 @@ def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything
     with federation(tmp_path) as (s, relays):
         topo = s.topology
         for r in topo.routers.values():
-            if r.operator != "primary":
-                s.start_operator_router(r.operator)
-                continue
-            env = topology.configure(topo, r, tmp_path / "routers")
-            env["TLTRACK_ZENOH_ACCESS_CONTROL_FILE"] = str(open_acl)
-            s.start(f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(topo, r)], env)
+            acl = {"TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(open_acl)}
+            s.start_operator_router(r.operator, acl if r.operator == "primary" else None)
         with (
             demo.client(topo.routers["primary"].endpoint, "primary") as z,
             Subscriber(z, [keys.ALL, "tltrack/source/s1/meas/*"]) as sub,
@@ -247,10 +243,8 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
     signer = certs if issuer == "operators-ca" else rogue
     with demo.Stack(topo.referee.endpoint, tmp_path / "logs", topology=topo) as s:
         for r in topo.routers.values():
-            env = topology.configure(topo, r, tmp_path / "routers")
             cert = certs / "router.pem" if r is ref else signer / "router-primary.pem"
-            env |= _tls_env(certs / "ca.pem", cert)
-            s.start(f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(topo, r)], env)
+            s.start_operator_router(r.operator, _tls_env(certs / "ca.pem", cert))
         tls = {
             "tls_root_ca": certs / "ca.pem",
             "tls_cert": certs / "sensor.pem",

@@ -304,15 +304,37 @@ def router(
     connect: Annotated[
         list[str] | None, typer.Option(help="other routers to dial (redialled when lost)")
     ] = None,
+    operator: Annotated[
+        str | None,
+        typer.Option(
+            help="be this operator's router of the federated topology (referee, primary, "
+            "source/<id>): the package's ACL and dictionary for it, dialling as router-<operator>"
+        ),
+    ] = None,
 ) -> None:
     """Run a Zenoh router (the Python package in router mode) until Ctrl-C or SIGTERM.
 
-    Example: `tltrack router --listen tcp/0.0.0.0:7447`; one operator's router in the federated
-    topology: `tltrack router --listen tcp/0.0.0.0:7448 --connect tcp/referee.example.org:7447`
+    Example: `tltrack router --listen tcp/0.0.0.0:7447`; the primary's router of the federated
+    topology: `tltrack router --operator primary --listen tcp/0.0.0.0:7447 --connect
+    tls/referee.example.org:7448`. The environment (TLTRACK_ZENOH_*) overrides what --operator sets.
     """
+    import os
+    import tempfile
+
+    from tltrack import keys, topology
     from tltrack.transport import ZenohSettings, run_router
 
-    run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)
+    if operator is not None and not (
+        operator in (keys.REFEREE, keys.PRIMARY)
+        or f"router-{operator.replace('/', '-')}" in topology.all_passwords()
+    ):
+        console.print(f"[red]error:[/red] --operator: unknown operator {operator!r}")
+        raise typer.Exit(2)
+    with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
+        if operator is not None:
+            for name, value in topology.access_env(operator, Path(tmp)).items():
+                os.environ.setdefault(name, value)
+        run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)
 
 
 @app.command(

@@ -219,19 +219,19 @@ class Stack:
 
     def start_router(self) -> None:
         """The router (single), or every operator's router (federated: ``router_<operator>``)."""
-        topo = self.topology
-        if topo is None or not self.federated:
+        if not self.federated:
             access = router_access_env() if self.secure else {}
             self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
             return
-        for r in topo.routers.values():
+        assert self.topology is not None
+        for r in self.topology.routers.values():
             self.start_operator_router(r.operator)
 
-    def start_operator_router(self, operator: str) -> None:
-        """(Re)start one operator's router of the federated topology."""
+    def start_operator_router(self, operator: str, env: dict[str, str] | None = None) -> None:
+        """(Re)start one operator's router of the federated topology (``env``: overrides, such
+        as another ACL file or TLS settings)."""
         assert self.topology is not None
         r = self.topology.routers[operator]
-        env = topology.configure(self.topology, r, self.logs / "routers")
         self.start(
             f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(self.topology, r)], env
         )

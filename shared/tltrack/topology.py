@@ -28,7 +28,6 @@ Kind = Literal["single", "federated"]
 TOPOLOGIES: tuple[Kind, ...] = ("federated", "single")
 
 ACCESS_DIR = Path(__file__).resolve().parent / "access"
-ROUTERS_DIR = ACCESS_DIR / "routers"
 
 
 def free_port() -> int:
@@ -101,9 +100,6 @@ class Topology:
             return self.referee.endpoint
         return self.routers[identity_operator(identity)].endpoint
 
-    def dialled_by(self, router: Router) -> list[Router]:
-        return [r for r in self.routers.values() if router.operator in r.dials]
-
 
 def single(endpoint: str) -> Topology:
     return Topology("single", {keys.REFEREE: Router(keys.REFEREE, endpoint)})
@@ -151,40 +147,49 @@ def all_passwords(access: Path = ACCESS_DIR) -> dict[str, str]:
 
 def acl_text(router: Router, access: Path = ACCESS_DIR) -> str:
     """The router's ``access_control`` section, from the package's templates."""
-    if router.operator == keys.PRIMARY or router.operator == keys.REFEREE:
+    if router.operator in (keys.PRIMARY, keys.REFEREE):
         return (access / "routers" / f"{router.name}.json5").read_text()
     sid = router.operator.removeprefix("source/")
     return (access / "routers" / "source.json5").read_text().replace("SID", sid)
 
 
-def configure(topology: Topology, router: Router, out: Path) -> dict[str, str]:
-    """Write ``router``'s ACL and password dictionary into ``out``; the environment of its
-    ``tltrack router`` process (security settings, and the identity it dials others under)."""
-    if topology.kind == "single":
-        return {
-            "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(ACCESS_DIR / "acl.json5"),
-            "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(ACCESS_DIR / "users.txt"),
-        }
-    pw = all_passwords()
-    known = [*router.local_identities, *(r.user for r in topology.dialled_by(router))]
+def diallers(operator: str, access: Path = ACCESS_DIR) -> list[str]:
+    """The routers that may dial ``operator``'s: every operator's dials the referee's, every
+    source's the primary's."""
+    routers = passwords(access / "routers" / "users.txt")
+    if operator == keys.REFEREE:
+        return list(routers)
+    if operator == keys.PRIMARY:
+        return [u for u in routers if u.startswith("router-source-")]
+    return []
+
+
+def access_env(operator: str, out: Path, access: Path = ACCESS_DIR) -> dict[str, str]:
+    """Write ``operator``'s router ACL and password dictionary into ``out``; the environment of
+    its ``tltrack router`` (those files, and the identity it dials other routers under)."""
+    router = Router(operator, "")
+    pw = all_passwords(access)
+    known = [*router.local_identities, *diallers(operator, access)]
     out.mkdir(parents=True, exist_ok=True)
     acl, users = out / f"{router.name}.acl.json5", out / f"{router.name}.users.txt"
-    acl.write_text(acl_text(router))
+    acl.write_text(acl_text(router, access))
     users.write_text("".join(f"{u}:{pw[u]}\n" for u in known))
     users.chmod(0o600)
     env = {
         "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(acl),
         "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(users),
     }
-    if router.dials:
+    if operator != keys.REFEREE:
         env |= {"TLTRACK_ZENOH_USERNAME": router.user, "TLTRACK_ZENOH_PASSWORD": pw[router.user]}
     return env
 
 
 def router_argv(topology: Topology, router: Router) -> list[str]:
-    """``tltrack router``'s arguments for ``router``."""
+    """``tltrack router``'s arguments for ``router`` (federated: as its operator's)."""
+    if topology.kind == "single":
+        return ["router", f"--listen={router.endpoint}"]
     dials = [
         f"--connect={topology.via.get((router.operator, op), topology.routers[op].endpoint)}"
         for op in router.dials
     ]
-    return ["router", f"--listen={router.endpoint}", *dials]
+    return ["router", f"--operator={router.operator}", f"--listen={router.endpoint}", *dials]
