@@ -91,6 +91,11 @@ class Simulator:
         self.s, self.cfg, self.svc = settings, cfg, svc
         self.layout = motion_model(cfg).layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
+        if settings.replay_csv and not settings.measurements:
+            raise replay.ReplayError(
+                "a replay publishes every sensor's rows here: it needs --measurements true "
+                "(the single-router topology)"
+            )
         models = {sid: sensor(cfg, sid) for sid in self.sensors}
         self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
         if self.recorded is not None:
