@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import pytest
 import zenoh
@@ -76,3 +77,25 @@ def test_the_routers_rules_ship_with_the_package() -> None:
         "source.json5",
         "users.txt",
     }
+
+
+def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
+    """The primary's router: router-source-sX may put tltrack/source/sX/transfer/*, no other key."""
+    env = access_env("primary", tmp_path)
+    cfg = zenoh.Config()
+    cfg.insert_json5(
+        "access_control", (tmp_path / env["TLTRACK_ZENOH_ACCESS_CONTROL_FILE"]).read_text()
+    )
+    acl = json.loads(cfg.get_json("access_control"))
+    rules = {r["id"]: r for r in acl["rules"]}
+    for sid in ("s1", "s2", "s3"):
+        (policy,) = [p for p in acl["policies"] if p["subjects"] == [f"router-source-{sid}"]]
+        puts = {
+            ke
+            for rid in policy["rules"]
+            if "put" in rules[rid]["messages"]
+            for ke in rules[rid]["key_exprs"]
+        }
+        assert puts == {f"tltrack/source/{sid}/transfer/*"}, (sid, puts)
+    grouped = [p for p in acl["policies"] if "source-routers" in p["subjects"]]
+    assert all(rules[r]["permission"] == "deny" for p in grouped for r in p["rules"])
