@@ -8,6 +8,7 @@ The sentinels are the raw measurements themselves: msgpack encodes each componen
 from __future__ import annotations
 
 import contextlib
+import csv
 import dataclasses
 import json
 import shutil
@@ -25,6 +26,7 @@ from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
+from tltrack.models.from_config import sensor
 from tltrack.transport import Publisher, Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
@@ -67,20 +69,16 @@ def run_episode(
     steps: int,
     pace: float,
     primary_env: dict[str, str] | None = None,
-    sensor_env: dict[str, str] | None = None,
+    sensor_env: dict[str, dict[str, str]] | None = None,
 ) -> None:
     """The scorer, the trackers and the sensors, then sensor_sim (routers already started)."""
     s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
     s.start_service("primary_tracker", env=primary_env)
     s.start_service("source_tracker", identity="source-s1")
     cfg = config(steps)
-    s.start_service("sensor_primary", service="sensor", identity="primary")
-    s.start_service(
-        "sensor_s1",
-        service="sensor",
-        identity="source-s1",
-        env={"TLTRACK_SENSOR_SENSOR": "s1", **(sensor_env or {})},
-    )
+    for sid, user in (("primary", "primary"), ("s1", "source-s1")):
+        env = {"TLTRACK_SENSOR_SENSOR": sid, **(sensor_env or {}).get(sid, {})}
+        s.start_service(f"sensor_{sid}", service="sensor", identity=user, env=env)
     wait = ["primary:primary_tracker", "referee:scorer", "source/s1:source_tracker"]
     wait += ["primary:sensor", "source/s1:sensor"]
     s.start_service(
@@ -105,7 +103,7 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
             K,
             0.0,
             primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"},
-            sensor_env={"TLTRACK_ZENOH_ENDPOINTS": json.dumps([tap.endpoint])},
+            sensor_env={"s1": {"TLTRACK_ZENOH_ENDPOINTS": json.dumps([tap.endpoint])}},
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
@@ -265,3 +263,39 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
         router_log = (s.logs / "router_referee.log").read_text()
     assert router_log.count("listening on") == 1
     assert (received > 0) is (issuer == "operators-ca"), received
+
+
+def test_each_operators_sensor_replays_its_own_rows(tmp_path):
+    """Each operator's sensor replays a file of its own rows only (here the engine's draws, so
+    the lock-step episode must equal the engine's)."""
+    cfg = config()
+    x = truth(cfg, 0)
+    replays = {}
+    for sid in ("primary", "s1"):
+        model = sensor(cfg, sid)
+        path = replays[sid] = tmp_path / f"{sid}.csv"
+        with path.open("w", newline="") as fh:
+            out = csv.writer(fh)
+            out.writerow(["k", "sensor", *model.components])
+            for k, z in enumerate(measurements(cfg, 0, x, sid), start=1):
+                out.writerow([k, sid, *(repr(float(v)) for v in z)])
+    db = tmp_path / "scorer.sqlite"
+    with federation(tmp_path) as (s, _relays):
+        s.start_router()
+        run_episode(
+            s,
+            db,
+            K,
+            0.0,
+            primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"},
+            sensor_env={sid: {"TLTRACK_SENSOR_REPLAY_CSV": str(p)} for sid, p in replays.items()},
+        )
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        for sid in ("primary", "s1"):
+            assert "replaying" in (s.logs / f"sensor_{sid}.log").read_text(), logs(s)
+    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
+    live = estimates(db)
+    for name in ("tl-rpf", "rpf", "source-rpf"):
+        got = np.array([live[name][k][0] for k in range(1, K + 1)])
+        np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)

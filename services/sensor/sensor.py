@@ -3,22 +3,25 @@ publishes its measurement of that step on its owner's key, through its owner's r
 
 The measurements of an episode of run r come from the same per-run stream as ``tltrack
 experiment``'s (the truth regenerated from the seeds, then this sensor's noise), so the live
-episode still equals the engine's; no Truth message is needed, and none is read.
+episode still equals the engine's; no Truth message is needed, and none is read. With
+``replay_csv`` it replays this sensor's recorded rows instead (:mod:`tltrack.replay`'s schema;
+the file holds this sensor's rows only, as an operator has no other).
 """
 
 from __future__ import annotations
 
 import logging
 from collections import OrderedDict
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys
+from tltrack import keys, replay
 from tltrack.engine.scenario import measurements, truth
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick
-from tltrack.models.from_config import PRIMARY
+from tltrack.models.from_config import PRIMARY, sensor
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.transport import Received, ZenohSettings, decode_received
 
@@ -37,6 +40,7 @@ class Settings(BaseSettings):
         PRIMARY, pattern=r"^[A-Za-z0-9_-]{1,32}$", description="'primary' or a source id"
     )
     max_episodes: int = Field(4, ge=1, description="episodes measured at once")
+    replay_csv: Path | None = Field(None, description="replay this sensor's recorded rows")
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
@@ -94,11 +98,21 @@ class Sensor:
         if self.s.sensor != PRIMARY and self.s.sensor not in {src.id for src in cfg.sources}:
             log.info("episode %s has no sensor %s; ignored", start.episode, self.s.sensor)
             return
-        x = truth(cfg, start.run)
-        self.z[start.episode] = measurements(cfg, start.run, x, self.s.sensor)
+        sid = self.s.sensor
+        if self.s.replay_csv is None:
+            z = measurements(cfg, start.run, truth(cfg, start.run), sid)
+        else:
+            try:
+                z = replay.load(self.s.replay_csv, {sid: sensor(cfg, sid)})[sid]
+            except replay.ReplayError as err:
+                log.error("episode %s: nothing to replay: %s", start.episode, err)
+                self.svc.count("replay_refused")
+                return
+        self.z[start.episode] = z
         while len(self.z) > self.s.max_episodes:
             self.z.popitem(last=False)
-        log.info("episode %s (run %d): measuring as %s", start.episode, start.run, self.s.sensor)
+        how = f"replaying {self.s.replay_csv}" if self.s.replay_csv else "measuring"
+        log.info("episode %s (run %d): %s as %s", start.episode, start.run, how, sid)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -20,14 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys
+from tltrack import keys, replay
 from tltrack.config import Config
 from tltrack.engine.scenario import simulate
 from tltrack.engine.truth_file import experiment_config
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
 from tltrack.models.from_config import PRIMARY, motion_model, sensor
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.services.sensor_sim import replay
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
 
 log = logging.getLogger("sensor_sim")
@@ -93,8 +92,8 @@ class Simulator:
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
         if settings.replay_csv and not settings.measurements:
             raise replay.ReplayError(
-                "a replay publishes every sensor's rows here: it needs --measurements true "
-                "(the single-router topology)"
+                "with --measurements false each operator's sensor replays its own rows "
+                "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
             )
         models = {sid: sensor(cfg, sid) for sid in self.sensors}
         self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
