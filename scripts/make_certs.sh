@@ -6,11 +6,17 @@
 # OUT_DIR (default deploy/certs) receives
 #   ca.pem            the trust anchor: every router and client gets it (TLTRACK_ZENOH_TLS_ROOT_CA)
 #   ca.key            the CA's key: keep it off the hosts, and delete it once everything is issued
-#   router.pem/.key   the router's certificate; its names are localhost, 127.0.0.1 and every
-#                     ROUTER_HOST (a DNS name or an IP address the clients connect to)
-#   NAME.pem/.key     one client certificate per identity in $TLTRACK_CERT_NAMES (default
-#                     "sensor referee primary source-s1 dashboard"), common name = NAME: with
-#                     mutual TLS the router's ACL (shared/tltrack/access/acl.json5) knows the operator by it
+#   router.pem/.key   the router's certificate (the referee's, in the federated topology); its
+#                     names are localhost, 127.0.0.1 and every ROUTER_HOST (a DNS name or an IP
+#                     address the clients connect to)
+#   NAME.pem/.key     one certificate per identity in $TLTRACK_CERT_NAMES (default "sensor
+#                     referee primary source-s1 dashboard router-primary router-source-s1"),
+#                     common name = NAME: with mutual TLS the router's ACL
+#                     (shared/tltrack/access/acl.json5) knows the operator by it. A `router-*`
+#                     name is an operator's router of the federated topology: it both listens
+#                     and dials, so it gets the ROUTER_HOST names too (issue each on its own run,
+#                     with its host: TLTRACK_CERT_NAMES=router-primary scripts/make_certs.sh
+#                     deploy/certs hostp.example.org)
 #
 # Run it again with the same OUT_DIR to issue more certificates (e.g. TLTRACK_CERT_NAMES=source-s2):
 # an existing ca.pem/ca.key pair is reused, existing certificates are kept. TLTRACK_CERT_DAYS
@@ -20,7 +26,7 @@ set -euo pipefail
 out=${1:-deploy/certs}
 shift || true
 days=${TLTRACK_CERT_DAYS:-30}
-names=${TLTRACK_CERT_NAMES:-sensor referee primary source-s1 dashboard}
+names=${TLTRACK_CERT_NAMES:-sensor referee primary source-s1 dashboard router-primary router-source-s1}
 
 command -v openssl >/dev/null || { echo "make_certs.sh: needs the openssl command" >&2; exit 1; }
 mkdir -p "$out"
@@ -65,6 +71,10 @@ done
 issue router serverAuth,clientAuth "$san"
 for name in $names; do
     [[ $name =~ ^[A-Za-z0-9_-]{1,64}$ ]] || { echo "make_certs.sh: bad name '$name'" >&2; exit 2; }
-    issue "$name" clientAuth ""
+    if [[ $name == router-* ]]; then
+        issue "$name" serverAuth,clientAuth "$san"
+    else
+        issue "$name" clientAuth ""
+    fi
 done
 chmod 644 ./*.pem

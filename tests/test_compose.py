@@ -1,7 +1,9 @@
 """compose.yaml end to end, over real containers: build, `up -d`, five scored episodes, a network
 partition of the source tracker and its healing, three sources, and a teardown that leaves nothing
-behind. The router enforces shared/tltrack/access/acl.json5 as compose.yaml ships it; the tests on
-the host connect as the referee, with the demo password that compose.yaml defaults to.
+behind. compose.yaml runs a router per operator (the federated topology), each enforcing its
+operator's rules (shared/tltrack/access/routers/); the tests on the host connect as the referee
+to its router, or as the primary to the primary's, with the demo passwords compose.yaml defaults
+to.
 
 Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
 whichever of `docker compose` and `docker-compose` answers. The image is built with
@@ -49,20 +51,28 @@ LEASE_S = 2.0  # TLTRACK_ZENOH_LEASE_MS in compose.yaml
 # the transfer come back (the source's zenoh client retries its router with a backoff).
 PART_STEPS, PART_PACE = 300, 10.0
 PART_EPISODE = "part-r5"
+SENSING = ("source_tracker", "sensor")  #: each source operator's services
 # The three-source episode (deploy/three-sources.toml, profile three-sources)
 THREE_STEPS = 40
 THREE_EPISODE = "three-r6"
 THREE_WAIT_FOR = [
-    "source/s1:source_tracker",
-    "source/s2:source_tracker",
-    "source/s3:source_tracker",
+    *(f"source/{sid}:{service}" for sid in ("s1", "s2", "s3") for service in SENSING),
     "primary:primary_tracker",
+    "primary:sensor",
     "referee:scorer",
 ]
 
 USERS = ROOT / "shared" / "tltrack" / "access" / "users.txt"
 #: the identity each service of compose.yaml runs under
-COMPOSE_IDENTITY = {**IDENTITY, "source_tracker_s2": "source-s2", "source_tracker_s3": "source-s3"}
+COMPOSE_IDENTITY = {
+    **IDENTITY,
+    "source_tracker_s2": "source-s2",
+    "source_tracker_s3": "source-s3",
+    "sensor_primary": "primary",
+    **{f"sensor_{sid}": f"source-{sid}" for sid in ("s1", "s2", "s3")},
+}
+#: each operator's router in compose.yaml
+COMPOSE_ROUTERS = {"router", "router-primary", "router-s1", "router-s2", "router-s3"}
 #: how the host-side tests connect: as the referee (anyone may query the summary)
 HOST_USER = "referee"
 TRACK = ROOT / "examples" / "tracks" / "ais-nyharbor-2020-06-30-mmsi-367370920.csv"
@@ -169,7 +179,8 @@ class Stack:
     compose: list[str]
     project: str
     env: dict[str, str]
-    endpoint: str = ""
+    endpoint: str = ""  #: the referee's router
+    primary_endpoint: str = ""  #: the primary's router
 
     def cmd(
         self,
@@ -346,7 +357,9 @@ def stack(
     project = f"tltrack-test-{os.getpid()}-{secrets.token_hex(3)}"
     s = Stack(compose, project, _clean_env())
     # the router's port on a free loopback port of the host, chosen by the engine
-    s.env.update(TLTRACK_ROUTER_BIND="127.0.0.1", TLTRACK_ROUTER_PORT="0")
+    s.env.update(
+        TLTRACK_ROUTER_BIND="127.0.0.1", TLTRACK_ROUTER_PORT="0", TLTRACK_PRIMARY_ROUTER_PORT="0"
+    )
     # what sensor_sim runs first: the five scored episodes
     s.env.update(
         TLTRACK_SIM_PRESET="arasaratnam-haykin",
@@ -365,8 +378,9 @@ def stack(
         t0 = time.monotonic()
         s.cmd("up", "-d", timeout=300)
         print(f"{project}: up -d took {time.monotonic() - t0:.1f} s")
-        host_port = s.cmd("port", "router", "7447").stdout.strip().rsplit(":", 1)[-1]
-        s.endpoint = f"tcp/127.0.0.1:{int(host_port)}"
+        for router, field in (("router", "endpoint"), ("router-primary", "primary_endpoint")):
+            host_port = s.cmd("port", router, "7447").stdout.strip().rsplit(":", 1)[-1]
+            setattr(s, field, f"tcp/127.0.0.1:{int(host_port)}")
         yield s
     finally:
         (logdir / f"{project}.log").write_text(s.logs())
@@ -457,8 +471,8 @@ def service_env(config: str) -> dict[str, dict[str, str]]:
 
 def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) -> None:
     """compose.yaml runs every service under its operator's identity with users.txt's password by
-    default (so the two cannot drift apart), the router loads the ACL and that dictionary, and
-    each password can be overridden from the environment."""
+    default (so the two cannot drift apart), every router loads its operator's rules from the
+    package, and each password can be overridden from the environment."""
     users = passwords(USERS)
 
     def config(**env: str) -> dict[str, dict[str, str]]:
@@ -469,20 +483,18 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
 
     # the profile mc (a Dask cluster) has no Zenoh identity; docker-compose 1.29 lists it anyway
     env = {s: e for s, e in config().items() if not s.startswith("mc-")}
-    assert env.keys() == {"router", *COMPOSE_IDENTITY}, env.keys()
+    assert env.keys() == COMPOSE_ROUTERS | COMPOSE_IDENTITY.keys(), env.keys()
     for service, user in COMPOSE_IDENTITY.items():
         assert env[service].get("TLTRACK_ZENOH_USERNAME") == user, (service, env[service])
         assert env[service].get("TLTRACK_ZENOH_PASSWORD") == users[user], (service, user)
         assert "TLTRACK_ZENOH_ACCESS_CONTROL_FILE" not in env[service], service
-    router = env["router"]
-    assert "TLTRACK_ZENOH_USERNAME" not in router, router
-    # the router mounts the package's access/ at /config/access
-    for name, path in (
-        ("ACCESS_CONTROL_FILE", "acl.json5"),
-        ("USRPWD_DICTIONARY_FILE", "users.txt"),
-    ):
-        assert router.get(f"TLTRACK_ZENOH_{name}") == f"/config/access/{path}", router
-        assert (ROOT / "shared" / "tltrack" / "access" / path).is_file(), path
+    # each router takes its operator's rules and dictionary from the package (--operator)
+    for router in COMPOSE_ROUTERS:
+        assert (
+            not {"TLTRACK_ZENOH_USERNAME", "TLTRACK_ZENOH_ACCESS_CONTROL_FILE"} & env[router].keys()
+        )
+    for name in ("referee.json5", "primary.json5", "source.json5", "users.txt"):
+        assert (ROOT / "shared" / "tltrack" / "access" / "routers" / name).is_file(), name
 
     def variable(user: str) -> str:
         return "TLTRACK_PASSWORD_" + user.upper().replace("-", "_")
@@ -550,7 +562,7 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
     # The ACL is on: a session as the primary reads the primary's sensor, and (another session,
     # so the two subscriptions cannot share samples) never the source's.
     primary = ZenohSettings(
-        endpoints=[stack.endpoint], connect_timeout_ms=60_000, **credentials("primary")
+        endpoints=[stack.primary_endpoint], connect_timeout_ms=60_000, **credentials("primary")
     )
     with (
         open_session(primary) as own,
@@ -645,7 +657,8 @@ def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
     # what the services rejected so far (the partition may leave a few late messages)
     rejected_before = before["messages"]["rejected"]
     print(f"rejected before the three-source episode: {rejected_before}")
-    stack.cmd(*PROFILE, "up", "-d", "--no-deps", "source_tracker_s2", "source_tracker_s3")
+    extra = [f"{kind}{sid}" for sid in ("s2", "s3") for kind in ("router-", "sensor_")]
+    stack.cmd(*PROFILE, "up", "-d", "--no-deps", *extra, "source_tracker_s2", "source_tracker_s3")
     stack.run_sim(
         config="/config/three-sources.toml",
         wait_for=json.dumps(THREE_WAIT_FOR),

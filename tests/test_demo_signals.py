@@ -134,7 +134,7 @@ def test_sigterm_to_bench_live_stops_every_process_it_started(tmp_path: Path) ->
         )
     finally:
         del os.environ["TMPDIR"]
-    dbs = lambda: list(tmp_path.glob("tmp*/scorer-20.sqlite"))  # noqa: E731
+    dbs = lambda: list(tmp_path.glob("tmp*/scorer-*-20.sqlite"))  # noqa: E731
     assert wait_until(lambda: any(committed_rows(d) >= 6 for d in dbs()), 120), (
         tmp_path / "command.log"
     ).read_text()

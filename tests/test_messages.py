@@ -26,6 +26,7 @@ from tltrack.messages import (
     Message,
     MessageRejected,
     RejectCounter,
+    Tick,
     Transfer,
     Truth,
     decode,
@@ -78,6 +79,7 @@ def samples() -> list[Message]:
         ),
         EpisodeStart(**COMMON, k=0, run=2, config=cfg.model_dump(), K=cfg.K, steps_per_sec=10.0),
         EpisodeEnd(**COMMON, k=99, steps_sent=100),
+        Tick(**COMMON, k=3),
     ]
 
 

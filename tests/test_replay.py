@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.models.from_config import sensor
-from tltrack.services.sensor_sim.replay import ReplayError, load
+from tltrack.replay import ReplayError, load
 
 CFG = make_config(
     primary_sensor={"kind": "bearing"},

@@ -1,5 +1,7 @@
-"""Publishes episodes: EpisodeStart, then for k = 1..K the truth (referee only) and each sensor's
-measurement on its owner's key, then EpisodeEnd.
+"""Publishes episodes: EpisodeStart, then for k = 1..K a Tick on the world clock, the truth
+(referee only) and, in the single-router topology, each sensor's measurement on its owner's key,
+then EpisodeEnd. In the federated topology (``--measurements false``) each operator's own sensor
+service answers the Tick instead, so no raw data passes through the referee.
 
 The truth and measurements of episode i are run ``first_run + i`` of ``tltrack experiment`` with
 the same configuration: the same per-run random streams, so trackers can replay it exactly.
@@ -18,14 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys
+from tltrack import keys, replay
 from tltrack.config import Config
 from tltrack.engine.scenario import simulate
 from tltrack.engine.truth_file import experiment_config
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Truth, encode
+from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
 from tltrack.models.from_config import PRIMARY, motion_model, sensor
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.services.sensor_sim import replay
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
 
 log = logging.getLogger("sensor_sim")
@@ -54,6 +55,9 @@ class Settings(BaseSettings):
     pace: float = Field(20.0, ge=0, description="steps per second; 0 = as fast as possible")
     realtime: bool = Field(False, description="pace at one step per Ts")
     replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
+    measurements: bool = Field(
+        True, description="publish every sensor's measurements (false: each operator's sensor)"
+    )
     wait_for: list[str] = Field(
         default_factory=lambda: [
             "source/s1:source_tracker",
@@ -85,7 +89,12 @@ class Simulator:
     def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
         self.s, self.cfg, self.svc = settings, cfg, svc
         self.layout = motion_model(cfg).layout
-        self.sensors = [PRIMARY, *(src.id for src in cfg.sources)]
+        self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
+        if settings.replay_csv and not settings.measurements:
+            raise replay.ReplayError(
+                "with --measurements false each operator's sensor replays its own rows "
+                "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
+            )
         models = {sid: sensor(cfg, sid) for sid in self.sensors}
         self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
         if self.recorded is not None:
@@ -145,6 +154,7 @@ class Simulator:
                 break
             t_next += self.period
             t = time.time()
+            self.svc.publish(keys.clock(e), Tick(episode=e, sender=NAME, k=k, t_sensor=t))
             if truth is not None:
                 x, pos = truth[k], self.layout.position(truth[k])
                 self.svc.publish(

@@ -7,13 +7,14 @@ from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any, get_args
+from typing import Annotated, Any, Literal, get_args
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from tltrack.config import Config, ConfigError, FilterKind
+from tltrack.topology import Kind as TopologyKind
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -300,14 +301,40 @@ def reproduce(
 @app.command()
 def router(
     listen: Annotated[list[str] | None, typer.Option(help="endpoint(s) to listen on")] = None,
+    connect: Annotated[
+        list[str] | None, typer.Option(help="other routers to dial (redialled when lost)")
+    ] = None,
+    operator: Annotated[
+        str | None,
+        typer.Option(
+            help="be this operator's router of the federated topology (referee, primary, "
+            "source/<id>): the package's ACL and dictionary for it, dialling as router-<operator>"
+        ),
+    ] = None,
 ) -> None:
     """Run a Zenoh router (the Python package in router mode) until Ctrl-C or SIGTERM.
 
-    Example: `tltrack router --listen tcp/0.0.0.0:7447`
+    Example: `tltrack router --listen tcp/0.0.0.0:7447`; the primary's router of the federated
+    topology: `tltrack router --operator primary --listen tcp/0.0.0.0:7447 --connect
+    tls/referee.example.org:7448`. The environment (TLTRACK_ZENOH_*) overrides what --operator sets.
     """
+    import os
+    import tempfile
+
+    from tltrack import keys, topology
     from tltrack.transport import ZenohSettings, run_router
 
-    run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings())
+    if operator is not None and not (
+        operator in (keys.REFEREE, keys.PRIMARY)
+        or f"router-{operator.replace('/', '-')}" in topology.all_passwords()
+    ):
+        console.print(f"[red]error:[/red] --operator: unknown operator {operator!r}")
+        raise typer.Exit(2)
+    with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
+        if operator is not None:
+            for name, value in topology.access_env(operator, Path(tmp)).items():
+                os.environ.setdefault(name, value)
+        run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)
 
 
 @app.command(
@@ -335,14 +362,19 @@ def demo(
     ] = False,
     port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
     host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
+    topology: Annotated[
+        TopologyKind, typer.Option(help="a router per operator (federated), or one for all")
+    ] = "federated",
 ) -> None:
-    """Start the router, the scorer, the trackers and sensor_sim on loopback, run one episode,
-    print the summary.
+    """Start the routers, the scorer, the trackers, the sensors and sensor_sim on loopback, run
+    one episode, print the summary.
 
     Without --config the episode is the arasaratnam-haykin preset with a fixed truth, K = 100,
     N = 6000 (the values in brackets); with it, the file's values, unless an option overrides
-    them. The router enforces the package's access control; every service runs as its
-    operator. Any stop signal (or the death of this process) stops every process it started.
+    them. Federated: one router per operator (referee, primary, each source), each letting out
+    only what its owner shares; single: one router for all. The routers enforce the package's
+    access control; every service runs as its operator. Any stop signal (or the death of this
+    process) stops every process it started.
     """
     from tltrack import demo as d
 
@@ -358,7 +390,7 @@ def demo(
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:
         with d.stop_on_signals():
-            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host)
+            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host, topology)
     except d.Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
@@ -378,18 +410,25 @@ def _run_demo(
     serve: bool,
     port: int,
     host: str,
+    kind: TopologyKind = "federated",
 ) -> dict[str, Any]:
-    """One episode on a fresh stack; the scorer's summary, with ``access_control`` set."""
+    """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
+    ``topology`` set."""
+    from tltrack import topology
     from tltrack.filters.warm import warm_up
     from tltrack.summary import print_summary
 
-    endpoint = f"tcp/127.0.0.1:{d.free_port()}"
+    topo = topology.build(kind, [s.id for s in cfg.sources])
+    endpoint = topo.referee.endpoint
     db = out / "scorer.sqlite"
     for suffix in ("", "-wal", "-shm"):
         Path(f"{db}{suffix}").unlink(missing_ok=True)
-    console.print(f"router {endpoint} (access control: {d.ACCESS_DIR}); logs in {out / 'logs'}")
+    console.print(
+        f"{kind} topology, routers: {topology.describe(topo)} (access control: "
+        f"{d.ACCESS_DIR}); logs in {out / 'logs'}"
+    )
     warm_up()  # compile the kernels once here, not in several services at once
-    with d.Stack(endpoint, out / "logs", secure=True) as stack:
+    with d.Stack(endpoint, out / "logs", secure=True, topology=topo) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         wait_for = stack.start_trackers(cfg)
@@ -421,7 +460,8 @@ def _run_demo(
         if summary is None:
             console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
             raise typer.Exit(1)
-        summary["access_control"] = True  # the router enforced the ACL; every service logged in
+        summary["access_control"] = True  # the routers enforced the ACL; every service logged in
+        summary["topology"] = kind
         print_summary(summary)
         if serve:
             console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")
@@ -519,8 +559,13 @@ def bench_live(
         str, typer.Option(help="step rates to try, ascending")
     ] = "100,200,300,500,800",
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
+    topology: Annotated[
+        Literal["federated", "single", "both"],
+        typer.Option(help="a router per operator (federated), one for all (single), or both"),
+    ] = "both",
 ) -> None:
-    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate.
+    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate, in
+    either topology or both (one entry each under `topologies`).
 
     Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
     """
@@ -529,7 +574,10 @@ def bench_live(
 
     try:
         with stop_on_signals():
-            result = livebench.run(particles, pace, steps, [float(r) for r in rates.split(",")])
+            kinds = get_args(TopologyKind) if topology == "both" else (topology,)
+            result = livebench.run(
+                particles, pace, steps, [float(r) for r in rates.split(",")], kinds
+            )
     except Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None

@@ -1,5 +1,6 @@
-"""``tltrack demo``: the router and the four services as separate processes on loopback, one
-episode, the scorer's summary, and a clean shutdown (no orphan, no hang).
+"""``tltrack demo``: the routers (one per operator, or one for all: :mod:`tltrack.topology`)
+and the services as separate processes on loopback, one episode, the scorer's summary, and a
+clean shutdown (no orphan, no hang).
 
 Children never outlive the command that started them. Whatever stops it:
 
@@ -18,7 +19,6 @@ import ctypes.util
 import json
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -30,8 +30,10 @@ from typing import IO, Any
 
 import zenoh
 
-from tltrack import keys
+from tltrack import keys, topology
 from tltrack.config import Config
+from tltrack.topology import ACCESS_DIR, Topology
+from tltrack.topology import free_port as free_port
 from tltrack.transport import ZenohSettings, open_session, query
 
 SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
@@ -39,14 +41,6 @@ SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-#: The access control shipped in the package (deploy/zenoh/README.md): one identity per operator.
-ACCESS_DIR = Path(__file__).resolve().parent / "access"
 #: the identity each service runs under (README: who may read what)
 IDENTITY = {
     "sensor_sim": "sensor",
@@ -70,8 +64,12 @@ def check_access(cfg: Config | None = None, access: Path = ACCESS_DIR) -> None:
                 f"{access / name} is missing: the demo will not run a router without access "
                 "control (reinstall tltrack to restore the package's access/ files)"
             )
-    known = passwords(access / "users.txt")
-    unknown = [s.id for s in (cfg.sources if cfg else []) if f"source-{s.id}" not in known]
+    known = topology.all_passwords(access)
+    unknown = [
+        s.id
+        for s in (cfg.sources if cfg else [])
+        if not {f"source-{s.id}", f"router-source-{s.id}"} <= known.keys()
+    ]
     if unknown:
         ids = sorted(u.removeprefix("source-") for u in known if u.startswith("source-"))
         raise AccessControlMissingError(
@@ -82,8 +80,7 @@ def check_access(cfg: Config | None = None, access: Path = ACCESS_DIR) -> None:
 
 def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
     """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
-    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
-    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
+    return topology.passwords(users)
 
 
 def identity_env(user: str, users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
@@ -173,18 +170,31 @@ def _child_setup(parent: int) -> Callable[[], None]:
 
 @dataclass
 class Stack:
-    """A router and services as child processes, each logging to ``logs/<name>.log``.
+    """Routers and services as child processes, each logging to ``logs/<name>.log``.
 
-    ``secure``: the router enforces the shipped ACL and each service runs under its operator's
-    identity, as in a deployment.
+    ``secure``: the routers enforce the shipped ACLs and each service runs under its operator's
+    identity, as in a deployment. ``topology``: one router at ``endpoint`` (the default), or a
+    federated one (always secure; ``endpoint`` is then the referee's router, where the summary
+    is asked for). In the federated topology each operator's sensor runs beside its tracker.
     """
 
     endpoint: str
     logs: Path
     secure: bool = False
     env: dict[str, str] = field(default_factory=dict)
+    topology: Topology | None = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     _files: list[IO[bytes]] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.topology is None:
+            self.topology = topology.single(self.endpoint)
+        self.endpoint = self.topology.referee.endpoint
+        self.secure = self.secure or self.federated
+
+    @property
+    def federated(self) -> bool:
+        return self.topology is not None and self.topology.kind == "federated"
 
     def start(self, name: str, argv: list[str], env: dict[str, str] | None = None) -> None:
         self.logs.mkdir(parents=True, exist_ok=True)
@@ -208,8 +218,23 @@ class Stack:
             )
 
     def start_router(self) -> None:
-        access = router_access_env() if self.secure else {}
-        self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
+        """The router (single), or every operator's router (federated: ``router_<operator>``)."""
+        if not self.federated:
+            access = router_access_env() if self.secure else {}
+            self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
+            return
+        assert self.topology is not None
+        for r in self.topology.routers.values():
+            self.start_operator_router(r.operator)
+
+    def start_operator_router(self, operator: str, env: dict[str, str] | None = None) -> None:
+        """(Re)start one operator's router of the federated topology (``env``: overrides, such
+        as another ACL file or TLS settings)."""
+        assert self.topology is not None
+        r = self.topology.routers[operator]
+        self.start(
+            f"router_{r.name}", ["-m", "tltrack", *topology.router_argv(self.topology, r)], env
+        )
 
     def start_service(
         self,
@@ -222,14 +247,22 @@ class Stack:
         """Start ``service`` (default: ``name``) as process ``name``, under ``identity``
         (default: the service's, :data:`IDENTITY`) when the stack is secure."""
         module = service or name
-        creds = identity_env(identity or IDENTITY[module]) if self.secure else {}
-        self.start(name, ["-m", f"tltrack.services.{module}", *flags], {**creds, **(env or {})})
+        user = identity or IDENTITY[module]
+        extra = identity_env(user) if self.secure else {}
+        if self.federated and self.topology is not None:
+            extra["TLTRACK_ZENOH_ENDPOINTS"] = json.dumps([self.topology.endpoint(user)])
+            if module == "sensor_sim":  # each operator's sensor measures; sensor_sim keeps time
+                extra["TLTRACK_SIM_MEASUREMENTS"] = "false"
+        self.start(name, ["-m", f"tltrack.services.{module}", *flags], {**extra, **(env or {})})
 
     def start_trackers(self, cfg: Config) -> list[str]:
         """The primary's tracker and one tracker per source of ``cfg``, each under its operator's
-        identity; returns the liveliness tokens (``operator:service``) sensor_sim must await."""
+        identity (federated: and each operator's sensor); returns the liveliness tokens
+        (``operator:service``) sensor_sim must await."""
         self.start_service("primary_tracker")
         wait = ["primary:primary_tracker", "referee:scorer"]
+        if self.federated:
+            wait += self.start_sensors(cfg)
         for src in cfg.sources:
             one = len(cfg.sources) == 1 and src.id == "s1"
             self.start_service(
@@ -240,6 +273,23 @@ class Stack:
             )
             wait.append(f"source/{src.id}:source_tracker")
         return wait
+
+    def start_sensors(self, cfg: Config) -> list[str]:
+        """Each operator's sensor, on its operator's router; returns their liveliness tokens."""
+        self.start_service(
+            "sensor_primary",
+            service="sensor",
+            identity="primary",
+            env={"TLTRACK_SENSOR_SENSOR": "primary"},
+        )
+        for src in cfg.sources:
+            self.start_service(
+                f"sensor_{src.id}",
+                service="sensor",
+                identity=f"source-{src.id}",
+                env={"TLTRACK_SENSOR_SENSOR": src.id},
+            )
+        return ["primary:sensor", *(f"source/{src.id}:sensor" for src in cfg.sources)]
 
     def wait(self, name: str, timeout: float) -> int | None:
         try:
@@ -254,16 +304,15 @@ class Stack:
             p.wait(10)
 
     def stop(self, timeout: float = 6.0) -> dict[str, int | None]:
-        """SIGTERM every service at once, then the router; SIGKILL what outlives ``timeout``.
+        """SIGTERM every service at once, then the routers; SIGKILL what outlives ``timeout``.
 
-        The router goes last, so the services' last messages (and the scorer's final rows) still
-        reach it while they close.
+        The routers go last, so the services' last messages (and the scorer's final rows) still
+        reach them while they close.
         """
         with _signals_deferred():
-            services = [p for n, p in self.procs.items() if n != "router"]
+            services = [p for n, p in self.procs.items() if not n.startswith("router")]
             _terminate(services, timeout)
-            if "router" in self.procs:
-                _terminate([self.procs["router"]], timeout)
+            _terminate([p for n, p in self.procs.items() if n.startswith("router")], timeout)
         for f in self._files:
             f.close()
         return {n: p.returncode for n, p in self.procs.items()}

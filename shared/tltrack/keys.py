@@ -8,8 +8,9 @@ Layout (``e`` is an episode id, ``sid`` a source id, both ``[A-Za-z0-9_-]{1,64}`
 
     tltrack/episode/{e}                          EpisodeStart / EpisodeEnd   (sensor_sim)
     tltrack/truth/{e}                            Truth                       (sensor_sim, referee)
-    tltrack/primary/meas/{e}                     Measurement                 (sensor_sim -> primary)
-    tltrack/source/{sid}/meas/{e}                Measurement                 (sensor_sim -> source)
+    tltrack/clock/{e}                            Tick: step k is due         (sensor_sim -> sensors)
+    tltrack/primary/meas/{e}                     Measurement                 (primary's sensor)
+    tltrack/source/{sid}/meas/{e}                Measurement                 (source's sensor)
     tltrack/source/{sid}/transfer/{e}            Transfer                    (source -> primary)
     tltrack/source/{sid}/estimate/{e}            EstimateMsg                 (source -> scorer)
     tltrack/primary/estimate/{tl|isolated}/{e}   EstimateMsg                 (primary -> scorer)
@@ -87,6 +88,11 @@ def truth(e: str) -> str:
     return f"{ROOT}/truth/{_seg(e, 'episode id')}"
 
 
+def clock(e: str) -> str:
+    """The world clock: one Tick per step, to which every operator's sensor answers."""
+    return f"{ROOT}/clock/{_seg(e, 'episode id')}"
+
+
 def primary_meas(e: str) -> str:
     """The primary sensor's measurements."""
     return f"{ROOT}/primary/meas/{_seg(e, 'episode id')}"
@@ -133,6 +139,7 @@ SCORER_SUMMARY = f"{ROOT}/scorer/summary"
 
 EPISODES = episode(ANY)  #: tltrack/episode/*
 TRUTHS = truth(ANY)  #: tltrack/truth/*
+CLOCKS = clock(ANY)  #: tltrack/clock/*
 PRIMARY_MEAS = primary_meas(ANY)  #: tltrack/primary/meas/*
 SOURCE_MEAS = source_meas(ANY, ANY)  #: tltrack/source/*/meas/*
 TRANSFERS = transfer(ANY, ANY)  #: tltrack/source/*/transfer/*
@@ -146,6 +153,7 @@ ALIVE = f"{ROOT}/alive/**"  #: every liveliness token
 KeyKind = Literal[
     "episode",
     "truth",
+    "clock",
     "primary_meas",
     "source_meas",
     "transfer",
@@ -180,6 +188,8 @@ def parse(key: str) -> KeyInfo:
         return KeyInfo("episode", episode=p[2], operator=REFEREE)
     if n == 3 and p[1] == "truth":
         return KeyInfo("truth", episode=p[2], operator=REFEREE)
+    if n == 3 and p[1] == "clock":
+        return KeyInfo("clock", episode=p[2], operator=REFEREE)
     if n == 3 and p[1:3] == ["scorer", "summary"]:
         return KeyInfo("scorer_summary", operator=REFEREE, service="scorer")
     if p[1] == PRIMARY:

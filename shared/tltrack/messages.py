@@ -322,8 +322,16 @@ class EpisodeEnd(Message):
     steps_sent: Annotated[int, Field(ge=0, le=MAX_K)]
 
 
+class Tick(Message):
+    """sensor_sim's world clock: step ``k`` is due, so each operator's sensor publishes its
+    measurement of it (the federated topology, where no raw data passes through the referee)."""
+
+    TYPE: ClassVar[str] = "tick"
+    type: Literal["tick"] = "tick"
+
+
 MESSAGE_TYPES: dict[str, type[Message]] = {
-    m.TYPE: m for m in (Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd)
+    m.TYPE: m for m in (Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd, Tick)
 }
 
 M = TypeVar("M", bound=Message)

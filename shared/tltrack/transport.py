@@ -126,10 +126,15 @@ class ZenohSettings(BaseSettings):
 
         put("mode", self.mode)
         put("scouting/multicast/enabled", False)
+        # routers link only where configured (tltrack.topology): no router learns of another
+        # through a third, so none can route one operator's traffic through a neighbour's host
+        put("scouting/gossip/enabled", False)
         put("connect/endpoints", list(self.endpoints))
         put("listen/endpoints", list(self.listen))
         if self.mode == "client":
             put("connect/timeout_ms", self.connect_timeout_ms)
+        else:  # a router redials a lost neighbour every second at most
+            put("connect/retry", {"period_max_ms": 1000})
         put("transport/link/tx/lease", self.lease_ms)
         put("transport/link/tx/keep_alive", self.keep_alive)
         if self.username is not None and self.password is not None:

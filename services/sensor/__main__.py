@@ -1,0 +1,3 @@
+from tltrack.services.sensor.sensor import main
+
+main()

@@ -1,0 +1,130 @@
+"""An operator's sensor in the federated topology: on each Tick of sensor_sim's clock it
+publishes its measurement of that step on its owner's key, through its owner's router.
+
+The measurements of an episode of run r come from the same per-run stream as ``tltrack
+experiment``'s (the truth regenerated from the seeds, then this sensor's noise), so the live
+episode still equals the engine's; no Truth message is needed, and none is read. With
+``replay_csv`` it replays this sensor's recorded rows instead (:mod:`tltrack.replay`'s schema;
+the file holds this sensor's rows only, as an operator has no other).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import OrderedDict
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+from tltrack import keys, replay
+from tltrack.engine.scenario import measurements, truth
+from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick
+from tltrack.models.from_config import PRIMARY, sensor
+from tltrack.service import Service, load_settings, setup_logging
+from tltrack.transport import Received, ZenohSettings, decode_received
+
+log = logging.getLogger("sensor")
+NAME = "sensor"
+
+
+class Settings(BaseSettings):
+    """Environment ``TLTRACK_SENSOR_<FIELD>`` or ``--<field>``."""
+
+    model_config = SettingsConfigDict(
+        env_prefix="TLTRACK_SENSOR_", cli_prog_name=NAME, env_ignore_empty=True
+    )
+
+    sensor: str = Field(
+        PRIMARY, pattern=r"^[A-Za-z0-9_-]{1,32}$", description="'primary' or a source id"
+    )
+    max_episodes: int = Field(4, ge=1, description="episodes measured at once")
+    replay_csv: Path | None = Field(None, description="replay this sensor's recorded rows")
+    log_level: str = "INFO"
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
+
+def operator(sensor: str) -> str:
+    """The operator that owns ``sensor``: its key prefix and its router."""
+    return keys.PRIMARY if sensor == PRIMARY else keys.source_operator(sensor)
+
+
+class Sensor:
+    def __init__(self, settings: Settings, svc: Service) -> None:
+        self.s, self.svc = settings, svc
+        self.z: OrderedDict[str, NDArray[np.float64]] = OrderedDict()  #: episode -> (K, n_z)
+
+    def key(self, e: str) -> str:
+        sid = self.s.sensor
+        return keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
+
+    def handle(self, item: Received) -> None:
+        info = self.svc.key_info(item)
+        if info is None or info.episode is None:
+            return
+        e = info.episode
+        if info.kind == "episode":
+            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
+            if isinstance(msg, EpisodeStart):
+                self._open(msg)
+            elif isinstance(msg, EpisodeEnd):
+                self.z.pop(e, None)
+        elif info.kind == "clock":
+            tick = decode_received(item, Tick, self.svc.rejects)
+            z = self.z.get(e)
+            if tick is None:
+                return
+            if z is None or not 1 <= tick.k <= len(z):
+                self.svc.rejects.add(item.key, "unknown_episode")
+                return
+            self.svc.publish(
+                self.key(e),
+                Measurement(
+                    episode=e,
+                    sender=NAME,
+                    k=tick.k,
+                    t_sensor=tick.t_sensor,
+                    sensor=self.s.sensor,
+                    z=z[tick.k - 1],
+                ),
+            )
+            self.svc.count("steps")
+
+    def _open(self, start: EpisodeStart) -> None:
+        if start.episode in self.z:
+            return
+        cfg = start.parsed_config()
+        if self.s.sensor != PRIMARY and self.s.sensor not in {src.id for src in cfg.sources}:
+            log.info("episode %s has no sensor %s; ignored", start.episode, self.s.sensor)
+            return
+        sid = self.s.sensor
+        if self.s.replay_csv is None:
+            z = measurements(cfg, start.run, truth(cfg, start.run), sid)
+        else:
+            try:
+                z = replay.load(self.s.replay_csv, {sid: sensor(cfg, sid)})[sid]
+            except replay.ReplayError as err:
+                log.error("episode %s: nothing to replay: %s", start.episode, err)
+                self.svc.count("replay_refused")
+                return
+        self.z[start.episode] = z
+        while len(self.z) > self.s.max_episodes:
+            self.z.popitem(last=False)
+        how = f"replaying {self.s.replay_csv}" if self.s.replay_csv else "measuring"
+        log.info("episode %s (run %d): %s as %s", start.episode, start.run, how, sid)
+
+
+def main(argv: list[str] | None = None) -> None:
+    settings = load_settings(Settings, argv)
+    setup_logging(settings.log_level)
+    with Service(NAME, operator(settings.sensor), settings.zenoh) as svc:
+        inbox = svc.subscribe(keys.EPISODES, keys.CLOCKS)
+        sensor = Sensor(settings, svc)
+        for item in svc.running_episodes():
+            sensor.handle(item)
+        svc.announce()
+        while not svc.stop.is_set():
+            for item in svc.drain(inbox, timeout=0.2):
+                sensor.handle(item)
+            svc.publish_stats()

@@ -1,0 +1,101 @@
+"""tltrack.topology: who dials whom, and each router's rules and dictionary (no process)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+import zenoh
+from tltrack import topology
+from tltrack.topology import access_env, federated, identity_operator, passwords, router_argv
+
+
+def test_each_source_dials_the_primary_and_every_router_the_referee() -> None:
+    topo = federated(["s1", "s2"])
+    dials = {op: set(r.dials) for op, r in topo.routers.items()}
+    assert dials == {
+        "referee": set(),
+        "primary": {"referee"},
+        "source/s1": {"primary", "referee"},
+        "source/s2": {"primary", "referee"},
+    }
+    assert len({r.endpoint for r in topo.routers.values()}) == 4
+    assert topo.endpoint("dashboard") == topo.referee.endpoint
+    assert topo.endpoint("source-s2") == topo.routers["source/s2"].endpoint
+
+
+def test_a_router_dials_through_a_relay_when_told() -> None:
+    topo = federated(["s1"])
+    relayed = dataclasses.replace(topo, via={("source/s1", "primary"): "tcp/127.0.0.1:9"})
+    argv = router_argv(relayed, relayed.routers["source/s1"])
+    assert argv[:2] == ["router", "--operator=source/s1"]
+    assert "--connect=tcp/127.0.0.1:9" in argv
+    assert f"--connect={topo.referee.endpoint}" in argv
+
+
+@pytest.mark.parametrize(
+    ("identity", "operator"),
+    [
+        ("sensor", "referee"),
+        ("dashboard", "referee"),
+        ("primary", "primary"),
+        ("source-s3", "source/s3"),
+    ],
+)
+def test_each_identity_logs_in_to_its_operators_router(identity: str, operator: str) -> None:
+    assert identity_operator(identity) == operator
+
+
+@pytest.mark.parametrize(
+    ("operator", "known", "dials_as"),
+    [
+        ("referee", {"sensor", "referee", "dashboard", "router-primary"}, None),
+        ("primary", {"primary", "router-source-s1", "router-source-s3"}, "router-primary"),
+        ("source/s2", {"source-s2"}, "router-source-s2"),
+    ],
+)
+def test_each_router_knows_its_services_and_the_routers_that_dial_it(
+    tmp_path, operator: str, known: set[str], dials_as: str | None
+) -> None:
+    env = access_env(operator, tmp_path)
+    users = passwords(tmp_path / env["TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE"])
+    assert known <= users.keys()
+    if operator != "referee":  # a router's dictionary never lets another operator's service in
+        assert not {"sensor", "referee", "dashboard"} & users.keys()
+    assert env.get("TLTRACK_ZENOH_USERNAME") == dials_as
+    acl = (tmp_path / env["TLTRACK_ZENOH_ACCESS_CONTROL_FILE"]).read_text()
+    assert "SID" not in acl
+    zenoh.Config().insert_json5("access_control", acl)  # zenoh parses it
+
+
+def test_the_routers_rules_ship_with_the_package() -> None:
+    routers = topology.ACCESS_DIR / "routers"
+    assert {p.name for p in routers.iterdir()} >= {
+        "referee.json5",
+        "primary.json5",
+        "source.json5",
+        "users.txt",
+    }
+
+
+def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
+    """The primary's router: router-source-sX may put tltrack/source/sX/transfer/*, no other key."""
+    env = access_env("primary", tmp_path)
+    cfg = zenoh.Config()
+    cfg.insert_json5(
+        "access_control", (tmp_path / env["TLTRACK_ZENOH_ACCESS_CONTROL_FILE"]).read_text()
+    )
+    acl = json.loads(cfg.get_json("access_control"))
+    rules = {r["id"]: r for r in acl["rules"]}
+    for sid in ("s1", "s2", "s3"):
+        (policy,) = [p for p in acl["policies"] if p["subjects"] == [f"router-source-{sid}"]]
+        puts = {
+            ke
+            for rid in policy["rules"]
+            if "put" in rules[rid]["messages"]
+            for ke in rules[rid]["key_exprs"]
+        }
+        assert puts == {f"tltrack/source/{sid}/transfer/*"}, (sid, puts)
+    grouped = [p for p in acl["policies"] if "source-routers" in p["subjects"]]
+    assert all(rules[r]["permission"] == "deny" for p in grouped for r in p["rules"])
