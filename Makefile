@@ -13,7 +13,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-## The live dual tracker over loopback Zenoh: router + 4 services, one episode, the scorer's summary.
+## The live dual tracker over loopback Zenoh: a router per operator and the services, one episode, the scorer's summary.
 demo: $(STAMP)
 	$(BIN)/tltrack demo
 

@@ -55,3 +55,12 @@ def test_the_times_are_validated_at_the_boundary() -> None:
         estimate(t_received=T0, t_step=float("nan"))
     with pytest.raises(ValueError, match="t_received"):
         estimate(t_received=-1.0, t_step=T0)
+
+
+def test_when_a_message_arrived_is_not_part_of_it() -> None:
+    """The transport stamps each decoded message with its arrival time; two copies of one
+    message, received at different times, are still equal (and the stamp is never sent)."""
+    a, b = estimate().received(T0 + 1.0), estimate().received(T0 + 2.0)
+    assert (a.received_at, b.received_at) == (T0 + 1.0, T0 + 2.0)
+    assert a == b and a != estimate(t_received=T0)
+    assert "received_at" not in a.model_dump()

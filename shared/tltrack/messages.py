@@ -178,6 +178,12 @@ class Message(BaseModel):
         self._received_at = t
         return self
 
+    def __eq__(self, other: object) -> bool:
+        """Equal fields make equal messages: when each copy arrived is not part of it."""
+        if not isinstance(other, Message):
+            return NotImplemented
+        return type(self) is type(other) and self.__dict__ == other.__dict__
+
     @field_validator("schema_version")
     @classmethod
     def _known_version(cls, v: int) -> int:
