@@ -52,13 +52,19 @@ def overhead(ex: Executor, n: int = 200) -> dict[str, float]:
     return {"latency_ms": round(latency * 1e3, 2), "bulk_ms_per_batch": round(bulk * 1e3, 2)}
 
 
-def rows(table: Path) -> list[str]:
-    """Table 2's rows without the wall-time column, and without the total wall line."""
-    return [
-        "|".join(line.split("|")[:-2])
+#: Table 2's timing columns, which differ from run to run
+TIMINGS = ("ms iso / TL", "wall [min]")
+
+
+def rows(table: Path) -> list[list[str]]:
+    """Table 2's rows without its timing columns, and without the total wall line."""
+    cells = [
+        [c.strip() for c in line.strip().strip("|").split("|")]
         for line in table.read_text().splitlines()
         if line.startswith("| ") and "---" not in line
     ]
+    keep = [i for i, name in enumerate(cells[0]) if name not in TIMINGS]
+    return [[row[i] for i in keep] for row in cells]
 
 
 def reproduce(runs: int, out: Path, extra: list[str]) -> float:
@@ -125,7 +131,7 @@ def main() -> None:
 
         extra = ["--batch-size", str(a.batch_size)] if a.batch_size else []
         walls: dict[str, list[float]] = {"pool": [], "dask": []}
-        tables: dict[str, list[str]] = {}
+        tables: dict[str, list[list[str]]] = {}
         for i in range(a.repeats):
             for how, more in (("pool", []), ("dask", ["--scheduler", address])):
                 out = work / f"{how}-{i}"
