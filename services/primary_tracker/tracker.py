@@ -11,7 +11,6 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from functools import partial
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -22,7 +21,7 @@ from tltrack.filters.decision import NotComparableError
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, estimate_message
+from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, publish_estimate
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -199,8 +198,9 @@ class PrimaryTracker:
         t_step: float,
         step_ms: float,
     ) -> None:
-        message = partial(
-            estimate_message,
+        publish_estimate(
+            self.svc,
+            keys.primary_estimate(role, e),
             z,
             keys.PRIMARY,
             ep.tracker.tl_name if role == "tl" else ep.tracker.iso_name,
@@ -211,8 +211,6 @@ class PrimaryTracker:
             t_step=t_step,
             step_ms=step_ms,
         )
-        self.svc.publish(keys.primary_estimate(role, e), message)
-        self.svc.count("recoveries" if recovered else "steps_on_track")
 
 
 def main(argv: list[str] | None = None) -> None:

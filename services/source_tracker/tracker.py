@@ -5,7 +5,6 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from functools import partial
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -18,7 +17,7 @@ from tltrack.tracking import (
     Episodes,
     SourceEpisode,
     StepQueue,
-    estimate_message,
+    publish_estimate,
     wire_covariance,
 )
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -112,22 +111,20 @@ class SourceTracker:
                     P_eta=wire_covariance(eta.cov[0]),
                 ),
             )
-        recovered = ep.tracker.recovered
-        message = partial(
-            estimate_message,
+        publish_estimate(
+            self.svc,
+            keys.source_estimate(sid, e),
             z,
             sid,
             ep.tracker.name,
             ep.tracker.layout,
             est,
             used=False,
-            recovered=recovered,
+            recovered=ep.tracker.recovered,
             t_step=t_step,
             step_ms=step_ms,
         )
-        self.svc.publish(keys.source_estimate(sid, e), message)
         self.svc.count("steps")
-        self.svc.count("recoveries" if recovered else "steps_on_track")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -13,7 +13,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
@@ -44,6 +44,7 @@ from tltrack.models.from_config import (
     sensor_spec,
 )
 from tltrack.models.observation import Observation
+from tltrack.service import Service
 from tltrack.transport import Received, decode_received
 
 T = TypeVar("T")
@@ -127,6 +128,40 @@ def estimate_message(
         t_received=z.received_at,
         t_step=t_step,
     )
+
+
+def publish_estimate(
+    svc: Service,
+    key: str,
+    z: Measurement,
+    sender: str,
+    name: str,
+    layout: Layout,
+    est: Estimate,
+    *,
+    used: bool,
+    recovered: bool,
+    t_step: float,
+    step_ms: float,
+) -> None:
+    """Publish filter ``name``'s estimate at the step of ``z`` on ``key`` (built only when it is
+    sent), and count the step as on track or as a recovery."""
+    svc.publish(
+        key,
+        partial(
+            estimate_message,
+            z,
+            sender,
+            name,
+            layout,
+            est,
+            used=used,
+            recovered=recovered,
+            t_step=t_step,
+            step_ms=step_ms,
+        ),
+    )
+    svc.count("recoveries" if recovered else "steps_on_track")
 
 
 class SourceEpisode:
