@@ -1,4 +1,5 @@
-"""A test-only sensor and a Kalman filter: linear-Gaussian stand-ins where the KF is exact.
+"""Test doubles: a sensor and a Kalman filter, linear-Gaussian stand-ins where the KF is exact,
+and a service that is never opened, to drive a service's handlers in-process.
 
 :class:`PositionSensor` is a whole new sensor written against the
 :class:`~tltrack.models.base.MeasurementModel` Protocol, outside the package: that it runs through
@@ -7,13 +8,20 @@ every filter kind and role (tests/test_model_interface.py) is what proves the in
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
+import zenoh
+from tltrack import keys
+from tltrack.messages import Message
 from tltrack.models.base import Layout
 from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.gaussian_sensor import GaussianSensor
+from tltrack.service import Service
+from tltrack.transport import Received, ZenohSettings
 
 CV_LAYOUT = ConstantVelocity.layout
 #: the paper's radar at the origin, as a transfer describes it
@@ -72,3 +80,20 @@ def kalman(model, sensor, x0, P0, zs, Rs):
             P = P - K @ S @ K.T
         out.append((m.copy(), P.copy()))
     return out
+
+
+class Offline(Service):
+    """A real :class:`~tltrack.service.Service` that is never opened: it counts and rejects as
+    in a process, and keeps what it would publish."""
+
+    def __init__(self, name: str, operator: str = keys.PRIMARY) -> None:
+        super().__init__(name, operator, ZenohSettings())
+        self.published: list[tuple[str, Message]] = []
+
+    def publish(self, key: str, msg: Message | Callable[[], Message]) -> None:
+        self.published.append((key, msg() if callable(msg) else msg))
+
+
+def received(key: str, payload: bytes) -> Received:
+    """A sample as a subscriber hands it over."""
+    return Received(key, payload, zenoh.SampleKind.PUT, time.time())

@@ -63,6 +63,18 @@ def federation(tmp: Path) -> Iterator[tuple[demo.Stack, dict[tuple[str, str], Re
         yield s, relays
 
 
+#: the filters of a live episode, as the engine names them
+LIVE = ("tl-rpf", "rpf", "source-rpf")
+
+
+def every_step(db: Path, s: demo.Stack) -> dict[str, dict[int, tuple[list[float], bool]]]:
+    """The scorer's record of the episode, which must hold every step of every filter."""
+    live = estimates(db)
+    steps = {name: sorted(live.get(name, {})) for name in LIVE}
+    assert all(ks == list(range(1, K + 1)) for ks in steps.values()), (steps, logs(s))
+    return live
+
+
 def run_episode(
     s: demo.Stack,
     db: Path,
@@ -107,6 +119,7 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        live = every_step(db, s)
         wire = {link: r.bytes() for link, r in relays.items()}
         local = tap.bytes()
     cfg = config()
@@ -122,9 +135,8 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
     assert b"\xa8transfer" not in wire["source/s1", keys.REFEREE]
     assert b"\xa8transfer" not in wire["primary", keys.REFEREE]
 
-    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
-    live = estimates(db)
-    for name in ("tl-rpf", "rpf", "source-rpf"):
+    offline = trace_run(cfg, list(LIVE), run=0)
+    for name in LIVE:
         got = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)
     assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
@@ -294,8 +306,8 @@ def test_each_operators_sensor_replays_its_own_rows(tmp_path):
         assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         for sid in ("primary", "s1"):
             assert "replaying" in (s.logs / f"sensor_{sid}.log").read_text(), logs(s)
-    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
-    live = estimates(db)
-    for name in ("tl-rpf", "rpf", "source-rpf"):
+        live = every_step(db, s)
+    offline = trace_run(cfg, list(LIVE), run=0)
+    for name in LIVE:
         got = np.array([live[name][k][0] for k in range(1, K + 1)])
         np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)

@@ -25,7 +25,7 @@ import msgpack
 import numpy as np
 import pytest
 import zenoh
-from doubles import RADAR
+from doubles import RADAR, Offline, received
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from livestack import SIM_DEFAULTS, estimates, logs, stack
@@ -58,12 +58,11 @@ from tltrack.messages import (
     decode,
     encode,
 )
-from tltrack.service import Service
 from tltrack.services.primary_tracker import tracker as primary_svc
 from tltrack.services.scorer import scorer as scorer_svc
 from tltrack.services.scorer.store import Store
 from tltrack.services.source_tracker import tracker as source_svc
-from tltrack.transport import Received, Subscriber, ZenohSettings
+from tltrack.transport import Subscriber
 
 E = "ep-r0"
 T0 = 1.8e9
@@ -282,22 +281,6 @@ def malformed(rnd: random.Random, kind: str) -> bytes:
 # ---- the handlers in-process, driven by hypothesis --------------------------------------------
 
 
-class Offline(Service):
-    """A real :class:`~tltrack.service.Service` that is never opened: it counts and rejects as
-    in a process, and keeps what it would publish."""
-
-    def __init__(self, name: str) -> None:
-        super().__init__(name, keys.PRIMARY, ZenohSettings())
-        self.published: list[tuple[str, Message]] = []
-
-    def publish(self, key: str, msg: Message | Callable[[], Message]) -> None:
-        self.published.append((key, msg() if callable(msg) else msg))
-
-
-def _received(key: str, payload: bytes) -> Received:
-    return Received(key, payload, zenoh.SampleKind.PUT, time.time())
-
-
 KIND_KEYS = {
     "episode": [keys.episode(E)],
     "measurement": [keys.primary_meas(E), keys.source_meas("s1", E)],
@@ -310,7 +293,7 @@ KIND_KEYS = {
 
 def _handlers(tmp: Path) -> dict[str, tuple[Any, Offline]]:
     """The three subscribing services' handlers, each in the middle of episode E."""
-    start = _received(keys.episode(E), encode(_template("episode")))
+    start = received(keys.episode(E), encode(_template("episode")))
     out: dict[str, tuple[Any, Offline]] = {}
     for name, make in (
         (
@@ -372,7 +355,7 @@ def test_each_handler_counts_every_malformed_payload_once(
         if key not in SUBSCRIBES[name]:
             continue
         before, published = svc.rejects.total, len(svc.published)
-        handler.handle(_received(key, payload))
+        handler.handle(received(key, payload))
         assert svc.rejects.total == before + 1, (name, key, payload[:80])
         assert len(svc.published) == published
 
@@ -381,7 +364,7 @@ def test_each_handler_counts_every_malformed_payload_once(
 
 
 def test_a_replayed_episode_start_is_counted_as_a_duplicate(tmp_path: Path) -> None:
-    start = _received(keys.episode(E), encode(_template("episode")))
+    start = received(keys.episode(E), encode(_template("episode")))
     for name, (handler, svc) in _handlers(tmp_path).items():
         handler.handle(start)
         assert svc.rejects.count(reason="duplicate") == 1, name
@@ -396,8 +379,8 @@ def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
         ("source_tracker", keys.source_meas("s1", "ep-later")),
     ):
         handler, svc = handlers[name]
-        handler.handle(_received(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1)))
-        handler.handle(_received(key, b"\xc1 not msgpack"))
+        handler.handle(received(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1)))
+        handler.handle(received(key, b"\xc1 not msgpack"))
         assert svc.rejects.count(reason="too_large") == 1, name
         assert svc.rejects.count(reason="not_msgpack") == 1, name
 
@@ -406,19 +389,19 @@ def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path
     scorer, svc = _handlers(tmp_path)["scorer"]
     truth, est = _template("truth"), _template("estimate")
     for msg, key in ((truth, keys.truth(E)), (est, keys.primary_estimate("tl", E))):
-        scorer.handle(_received(key, encode(msg)))  # kept
-        scorer.handle(_received(key, encode(msg)))  # a replay
+        scorer.handle(received(key, encode(msg)))  # kept
+        scorer.handle(received(key, encode(msg)))  # a replay
     scorer.handle(
-        _received(keys.primary_estimate("tl", E), encode(est.model_copy(update={"k": 10**6})))
+        received(keys.primary_estimate("tl", E), encode(est.model_copy(update={"k": 10**6})))
     )  # K is 10
     scorer.handle(
-        _received(
+        received(
             keys.primary_estimate("tl", "ep-zz"),
             encode(est.model_copy(update={"episode": "ep-zz"})),
         )
     )
     scorer.handle(
-        _received(
+        received(
             keys.primary_estimate("tl", E), encode(est.model_copy(update={"k": 6, "sender": "s1"}))
         )
     )  # not its key

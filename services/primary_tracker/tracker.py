@@ -21,7 +21,7 @@ from tltrack.filters.decision import NotComparableError
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes, PrimaryEpisode, StepQueue, publish_estimate
+from tltrack.tracking import PrimaryEpisode, StepQueue, TrackedEpisodes, publish_estimate
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -66,7 +66,7 @@ class Episode:
 class PrimaryTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        self.episodes: Episodes[Episode] = Episodes(settings.max_episodes, self._open)
+        self.episodes: TrackedEpisodes[Episode] = TrackedEpisodes(settings.max_episodes, self._open)
         self.alive: set[str] = set()  # source ids whose tracker token is up
         self.seen: set[str] = set()  # ... or ever was
 

@@ -11,7 +11,6 @@ the file holds this sensor's rows only, as an operator has no other).
 from __future__ import annotations
 
 import logging
-from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -19,10 +18,12 @@ from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys, replay
+from tltrack.config import Config
 from tltrack.engine.scenario import measurements, truth
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick
+from tltrack.messages import EpisodeStart, Measurement, Tick
 from tltrack.models.from_config import PRIMARY, sensor
 from tltrack.service import Service, load_settings, setup_logging
+from tltrack.tracking import Episodes
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("sensor")
@@ -51,9 +52,14 @@ def operator(sensor: str) -> str:
 
 
 class Sensor:
+    """Zenoh orders samples per key, not across keys: a tick can overtake its episode's start
+    (it is held until the start comes) and the episode's end can overtake its last ticks (the
+    episode is kept until the tick of its last step has been served)."""
+
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        self.z: OrderedDict[str, NDArray[np.float64]] = OrderedDict()  #: episode -> (K, n_z)
+        #: episode -> its measurements, (K, n_z)
+        self.episodes: Episodes[NDArray[np.float64]] = Episodes(settings.max_episodes, self._open)
 
     def key(self, e: str) -> str:
         sid = self.s.sensor
@@ -63,42 +69,41 @@ class Sensor:
         info = self.svc.key_info(item)
         if info is None or info.episode is None:
             return
-        e = info.episode
         if info.kind == "episode":
-            msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
-            if isinstance(msg, EpisodeStart):
-                self._open(msg)
-            elif isinstance(msg, EpisodeEnd):
-                self.z.pop(e, None)
+            self.episodes.handle(item, self.svc.rejects, recovery=False)
         elif info.kind == "clock":
             tick = decode_received(item, Tick, self.svc.rejects)
-            z = self.z.get(e)
-            if tick is None:
-                return
-            if z is None or not 1 <= tick.k <= len(z):
-                self.svc.rejects.add(item.key, "unknown_episode")
-                return
-            self.svc.publish(
-                self.key(e),
-                Measurement(
-                    episode=e,
-                    sender=NAME,
-                    k=tick.k,
-                    t_sensor=tick.t_sensor,
-                    sensor=self.s.sensor,
-                    z=z[tick.k - 1],
-                ),
-            )
-            self.svc.count("steps")
+            if tick is not None:
+                self._on_tick(info.episode, item.key, tick)
 
-    def _open(self, start: EpisodeStart) -> None:
-        if start.episode in self.z:
+    def _on_tick(self, e: str, key: str, tick: Tick) -> None:
+        z = self.episodes.get(e)
+        if z is None:
+            if not self.episodes.hold(e, lambda: self._on_tick(e, key, tick)):
+                self.svc.rejects.add(key, "unknown_episode")
             return
-        cfg = start.parsed_config()
-        if self.s.sensor != PRIMARY and self.s.sensor not in {src.id for src in cfg.sources}:
-            log.info("episode %s has no sensor %s; ignored", start.episode, self.s.sensor)
+        if not 1 <= tick.k <= len(z):
+            self.svc.rejects.add(key, "too_far")
             return
+        self.svc.publish(
+            self.key(e),
+            Measurement(
+                episode=e,
+                sender=NAME,
+                k=tick.k,
+                t_sensor=tick.t_sensor,
+                sensor=self.s.sensor,
+                z=z[tick.k - 1],
+            ),
+        )
+        self.svc.count("steps")
+        self.episodes.retire(e, tick.k + 1)
+
+    def _open(self, start: EpisodeStart, cfg: Config) -> NDArray[np.float64] | None:
         sid = self.s.sensor
+        if sid != PRIMARY and sid not in {src.id for src in cfg.sources}:
+            log.info("episode %s has no sensor %s; ignored", start.episode, sid)
+            return None
         if self.s.replay_csv is None:
             z = measurements(cfg, start.run, truth(cfg, start.run), sid)
         else:
@@ -107,12 +112,10 @@ class Sensor:
             except replay.ReplayError as err:
                 log.error("episode %s: nothing to replay: %s", start.episode, err)
                 self.svc.count("replay_refused")
-                return
-        self.z[start.episode] = z
-        while len(self.z) > self.s.max_episodes:
-            self.z.popitem(last=False)
+                return None
         how = f"replaying {self.s.replay_csv}" if self.s.replay_csv else "measuring"
         log.info("episode %s (run %d): %s as %s", start.episode, start.run, how, sid)
+        return z
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -14,9 +14,9 @@ from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import (
-    Episodes,
     SourceEpisode,
     StepQueue,
+    TrackedEpisodes,
     publish_estimate,
     wire_covariance,
 )
@@ -56,7 +56,7 @@ class Episode:
 class SourceTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        self.episodes: Episodes[Episode] = Episodes(settings.max_episodes, self._open)
+        self.episodes: TrackedEpisodes[Episode] = TrackedEpisodes(settings.max_episodes, self._open)
 
     def handle(self, item: Received) -> None:
         info = self.svc.key_info(item)

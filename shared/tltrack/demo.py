@@ -224,8 +224,23 @@ class Stack:
             self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
             return
         assert self.topology is not None
-        for r in self.topology.routers.values():
+        for r in self.topology.routers.values():  # the dialled before those that dial them
             self.start_operator_router(r.operator)
+            self.wait_listening(f"router_{r.name}")
+
+    def wait_listening(self, name: str, timeout: float = 60.0) -> None:
+        """Wait for router ``name`` to listen. A router that dials one not yet listening redials
+        only a second later, and what is published meanwhile travels without that link: a
+        source's first transfers would go the long way round and be dropped (no router forwards
+        one operator's traffic for another)."""
+        log, deadline = self.logs / f"{name}.log", time.monotonic() + timeout
+        while b" listening on " not in log.read_bytes():
+            code = self.procs[name].poll()
+            if code is not None or time.monotonic() > deadline:
+                tail = log.read_text(errors="replace")[-2000:]
+                why = f"exited with {code}" if code is not None else f"not listening in {timeout} s"
+                raise RuntimeError(f"{name} {why}:\n{tail}")
+            time.sleep(0.02)
 
     def start_operator_router(self, operator: str, env: dict[str, str] | None = None) -> None:
         """(Re)start one operator's router of the federated topology (``env``: overrides, such

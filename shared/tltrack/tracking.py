@@ -324,8 +324,8 @@ class StepQueue(Generic[T]):
 
 
 class Tracked(Protocol):
-    """What an episode's state needs for :meth:`Episodes.offer`: its queue of measurements, and
-    the size of its sensor's measurement."""
+    """What an episode's state needs for :meth:`TrackedEpisodes.offer`: its queue of
+    measurements, and the size of its sensor's measurement."""
 
     steps: StepQueue[Measurement]
 
@@ -333,11 +333,12 @@ class Tracked(Protocol):
     def n_z(self) -> int: ...
 
 
+S = TypeVar("S")
 E = TypeVar("E", bound=Tracked)
 
 
-class Episodes(Generic[E]):
-    """The episodes a tracker follows, each with its state ``T``.
+class Episodes(Generic[S]):
+    """The episodes a service follows, each with its state ``S``.
 
     An :class:`EpisodeStart` opens one (through ``open``, which may decline with None); an
     :class:`EpisodeEnd` marks its last step, and :meth:`retire` forgets it once that step is taken.
@@ -351,10 +352,10 @@ class Episodes(Generic[E]):
     HELD_EPISODES = 4
     HELD_PER_EPISODE = 64
 
-    def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], E | None]) -> None:
+    def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], S | None]) -> None:
         self.capacity = capacity
         self._open = open
-        self._state: dict[str, E] = {}
+        self._state: dict[str, S] = {}
         self._last_k: dict[str, int] = {}
         self._held: dict[str, list[Callable[[], None]]] = {}
 
@@ -399,6 +400,23 @@ class Episodes(Generic[E]):
         self._state[msg.episode] = state
         return self._held.pop(msg.episode, [])
 
+    def get(self, e: str) -> S | None:
+        return self._state.get(e)
+
+    def items(self) -> list[tuple[str, S]]:
+        return list(self._state.items())
+
+    def retire(self, e: str, next_k: int) -> None:
+        """Forget episode ``e`` if it has ended and its last step is behind ``next_k``."""
+        last = self._last_k.get(e)
+        if last is not None and next_k > last:
+            del self._state[e]
+            del self._last_k[e]
+
+
+class TrackedEpisodes(Episodes[E]):
+    """The episodes a tracker follows: each state also queues its measurements in step order."""
+
     def offer(self, e: str, key: str, z: Measurement, rejects: RejectCounter) -> None:
         """Queue ``z`` in its episode's step order; held while the episode is not yet open.
 
@@ -417,16 +435,3 @@ class Episodes(Generic[E]):
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":
             rejects.add(key, verdict)
-
-    def get(self, e: str) -> E | None:
-        return self._state.get(e)
-
-    def items(self) -> list[tuple[str, E]]:
-        return list(self._state.items())
-
-    def retire(self, e: str, next_k: int) -> None:
-        """Forget episode ``e`` if it has ended and its last step is behind ``next_k``."""
-        last = self._last_k.get(e)
-        if last is not None and next_k > last:
-            del self._state[e]
-            del self._last_k[e]
