@@ -13,7 +13,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from tltrack.config import Config, ConfigError, FilterKind
+from tltrack.config import PARTICLE_KINDS, Config, ConfigError, FilterKind
 from tltrack.topology import Kind as TopologyKind
 
 app = typer.Typer(
@@ -554,29 +554,41 @@ def study(
 def bench_live(
     particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
     pace: Annotated[float, typer.Option(help="steps/s for the latency run")] = 50.0,
-    steps: Annotated[int, typer.Option(help="steps per episode")] = 500,
+    steps: Annotated[int, typer.Option(help="steps of the latency episode")] = 500,
     rates: Annotated[
-        str, typer.Option(help="step rates to try, ascending")
-    ] = "100,200,300,500,800",
+        str, typer.Option(help="step rates to try, ascending; the ladder stops at the first missed")
+    ] = "100,200,300,500,800,1000",
+    ladder_steps: Annotated[int, typer.Option(help="steps per rung of the rate ladder")] = 5000,
+    filters: Annotated[str, typer.Option(help="particle filter kinds, comma-separated")] = "rpf,pf",
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
     topology: Annotated[
         Literal["federated", "single", "both"],
         typer.Option(help="a router per operator (federated), one for all (single), or both"),
     ] = "both",
 ) -> None:
-    """Benchmark the live pair: latency at a moderate pace, and the highest sustained rate, in
-    either topology or both (one entry each under `topologies`).
+    """Benchmark the live pair: latency at a moderate pace, the routed round trip and the TL step
+    it is compared with, and the highest sustained rate, for each topology x filter kind (one
+    entry each under `runs`; the defaults, federated and rpf, also at the top level).
 
     Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
     """
     from tltrack import livebench
     from tltrack.demo import Interrupted, stop_on_signals
 
+    kinds = get_args(TopologyKind) if topology == "both" else (topology,)
+    kinds_of_filter = tuple(f.strip() for f in filters.split(","))
+    if unknown := [f for f in kinds_of_filter if f not in PARTICLE_KINDS]:
+        console.print(f"[red]error:[/red] --filters: not a particle filter kind: {unknown}")
+        raise typer.Exit(2)
+    try:
+        ladder = [float(r) for r in rates.split(",")]
+    except ValueError:
+        console.print(f"[red]error:[/red] --rates: not a list of numbers: {rates!r}")
+        raise typer.Exit(2) from None
     try:
         with stop_on_signals():
-            kinds = get_args(TopologyKind) if topology == "both" else (topology,)
             result = livebench.run(
-                particles, pace, steps, [float(r) for r in rates.split(",")], kinds
+                particles, pace, steps, ladder, kinds, kinds_of_filter, ladder_steps
             )
     except Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")

@@ -6,7 +6,7 @@ was published (``t_sent``); its receiver adds its own arrival time ``t_recv``. T
 
 - ``to_tracker``: the sensor's timestamp to the tracker's receipt of z_k (a routed hop);
 - ``wait``: receipt to the step's start (the queue, and a primary's wait for the transfer);
-- ``step``: the filter step (a primary steps its TL filter and the isolated twin together);
+- ``step``: the filter's step (the primary's isolated twin steps after the TL estimate is out);
 - ``publish``: the step's end to the estimate's publication;
 - ``to_receiver``: publication to arrival at the scorer or the dashboard (a routed hop).
 

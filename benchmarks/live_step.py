@@ -1,0 +1,73 @@
+"""Is the live TL step slower than the engine's because of the service's code, or because of when
+it runs? Times, side by side in one process, the engine's tl-rpf step (``run_bench``), the
+service's ``PrimaryEpisode.step`` back to back, and the same 20 ms apart (50 steps/s).
+
+    .venv/bin/python benchmarks/live_step.py --particles 6000 --rounds 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from tltrack.bench import run_bench
+from tltrack.config import Config, make_config
+from tltrack.engine.scenario import simulate
+from tltrack.filters.warm import warm_up
+from tltrack.messages import Measurement, Transfer
+from tltrack.tracking import PrimaryEpisode, SourceEpisode, wire_covariance
+
+
+def tl_steps_ms(cfg: Config, kind: str, pause_s: float) -> list[float]:
+    """The TL steps of one episode as the primary_tracker takes them (messages in, estimate out)."""
+    sim = simulate(cfg, 0)
+    primary, source = PrimaryEpisode(cfg, 0, kind), SourceEpisode(cfg, 0, kind, "s1")
+    out: list[float] = []
+    transfers: dict[str, Transfer] = {}
+    for k in range(1, cfg.K + 1):
+        z = {
+            sid: Measurement(episode="e", sender="x", k=k, t_sensor=0.0, sensor=sid, z=zk[k - 1])
+            for sid, zk in sim.z.items()
+        }
+        _est, eta = source.step(z["s1"])
+        t0 = time.perf_counter()
+        primary.step(z["primary"], transfers)
+        if k > 1:  # step 1 has no transfer: not a TL step
+            out.append((time.perf_counter() - t0) * 1e3)
+        primary.step_twin()
+        transfers = {
+            "s1": Transfer(
+                episode="e",
+                sender="s1",
+                k=k,
+                k_apply=k + 1,
+                t_sensor=0.0,
+                sensor=source.sensor_spec,
+                eta=eta.mean[:, 0],
+                P_eta=wire_covariance(eta.cov[0]),
+            )
+        }
+        time.sleep(pause_s)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--particles", type=int, default=6000)
+    ap.add_argument("--rounds", type=int, default=2)
+    args = ap.parse_args()
+    warm_up()
+    cfg = make_config(preset="arasaratnam-haykin", truth="fixed", seed=0, particles=args.particles)
+    for _ in range(args.rounds):
+        engine = run_bench(args.particles, cfg=cfg, stonesoup=False)["ms_per_step"]["tl-rpf"]
+        back = float(np.median(tl_steps_ms(cfg, "rpf", 0.0)))
+        paced = float(np.median(tl_steps_ms(cfg, "rpf", 0.02)))
+        print(
+            f"tl-rpf step p50 (ms): engine {engine:.3f}, PrimaryEpisode back to back {back:.3f}"
+            f" ({back / engine:.2f}x), 20 ms apart {paced:.3f} ({paced / engine:.2f}x)"
+        )
+
+
+if __name__ == "__main__":
+    main()
