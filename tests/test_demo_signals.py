@@ -3,7 +3,8 @@
 Each test starts the command as a shell would start a background job (its own session, SIGINT
 ignored), waits until the scorer has committed some rows, sends one signal to that process alone,
 and then checks every process that was its descendant: all gone (or zombies awaiting a reaper)
-within 10 s, 5 s for SIGKILL, and the scorer's committed rows still there and intact.
+within 10 s, 5 s for SIGKILL, and the scorer's committed rows still there and intact. A service
+whose router is not there stops on a signal too, though it is blocked waiting for it.
 """
 
 from __future__ import annotations
@@ -145,3 +146,53 @@ def _free_port() -> int:
     from tltrack.demo import free_port
 
     return free_port()
+
+
+def _connecting(pid: int) -> bool:
+    """Whether zenoh's runtime has started in ``pid`` (its threads net-0 and app-0): the
+    process is then inside zenoh.open, waiting for its router."""
+    names = set()
+    for comm in Path(f"/proc/{pid}/task").glob("*/comm"):
+        with contextlib.suppress(OSError):
+            names.add(comm.read_text().strip())
+    return "net-0" in names
+
+
+@pytest.mark.parametrize(
+    ("service", "sig"),
+    [
+        ("scorer", signal.SIGTERM),
+        ("scorer", signal.SIGINT),
+        ("primary_tracker", signal.SIGTERM),
+        ("sensor", signal.SIGTERM),
+    ],
+)
+def test_a_service_waiting_for_a_router_that_is_not_there_stops_on_a_signal(
+    service: str, sig: int, tmp_path: Path
+) -> None:
+    """A service blocks in zenoh.open until its router answers (connect timeout -1); a stop
+    signal must still end it, as the router may be gone for good (found as orphans in a futex)."""
+    from tltrack.topology import free_port
+
+    env = {
+        **os.environ,
+        "TLTRACK_ZENOH_ENDPOINTS": f'["tcp/127.0.0.1:{free_port()}"]',  # nobody listens
+        "TLTRACK_SCORER_DB": str(tmp_path / "scorer.sqlite"),
+    }
+    with (tmp_path / "service.log").open("wb") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", f"tltrack.services.{service}"],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
+        )
+    try:
+        assert wait_until(lambda: _connecting(proc.pid), 60), (tmp_path / "service.log").read_text()
+        time.sleep(0.5)  # into the wait
+        os.kill(proc.pid, sig)
+        assert proc.wait(timeout=5) is not None
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

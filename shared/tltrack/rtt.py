@@ -30,8 +30,8 @@ PING, PONG, READY = "tltrack-bench/ping", "tltrack-bench/pong", "tltrack-bench/r
 def pong() -> None:
     """Echo every ping until SIGTERM (the endpoint from ``TLTRACK_ZENOH_ENDPOINTS``)."""
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    with open_session(ZenohSettings()) as session:
+    with open_session(ZenohSettings()) as session:  # SIGTERM ends it while it connects
+        signal.signal(signal.SIGTERM, lambda *_: stop.set())
         pub = session.declare_publisher(PONG, express=True)
         sub = session.declare_subscriber(PING, lambda s: pub.put(s.payload))
         token = session.liveliness().declare_token(READY)

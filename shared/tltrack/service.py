@@ -79,10 +79,14 @@ class Service:
         self._last_stats = 0.0
 
     def __enter__(self) -> Service:
+        # Until its router answers, zenoh.open blocks in native code, where no Python handler
+        # runs: a stop signal then ends the process at once (there is nothing to close yet).
         for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, self._on_signal)
+            signal.signal(sig, signal.SIG_DFL)
         self._exit = contextlib.ExitStack()
         self.session: zenoh.Session = self._exit.enter_context(open_session(self._zenoh))
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._on_signal)
         self._stats_pub = Publisher(self.session, keys.stats(self.operator, self.name))
         log.info("%s: session open (%s)", self.name, ", ".join(self._zenoh.endpoints))
         return self
