@@ -7,6 +7,7 @@ follow from those.
 
 from __future__ import annotations
 
+import abc
 from typing import ClassVar
 
 import numpy as np
@@ -18,7 +19,7 @@ from tltrack.models.base import Layout
 Array = NDArray[np.float64]
 
 
-class GaussianSensor:
+class GaussianSensor(abc.ABC):
     """Generic parts of a :class:`~tltrack.models.base.MeasurementModel`.
 
     Subclasses are frozen dataclasses with a ``position`` and a ``layout`` field.
@@ -37,11 +38,13 @@ class GaussianSensor:
     def n_z(self) -> int:
         return len(self.components)
 
+    @abc.abstractmethod
     def R(self, intensity: float) -> Array:
-        raise NotImplementedError
+        """Q_w at noise ``intensity``."""
 
+    @abc.abstractmethod
     def h(self, x: Array) -> Array:
-        raise NotImplementedError
+        """The noiseless measurement of states ``x``."""
 
     def residual(self, z: Array, zhat: Array) -> Array:
         """z - zhat with the angle components wrapped; components on the first axis."""
