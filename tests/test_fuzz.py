@@ -397,9 +397,9 @@ def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path
     scorer.handle(
         received(
             keys.primary_estimate("tl", "ep-zz"),
-            encode(est.model_copy(update={"episode": "ep-zz"})),
+            encode(est.model_copy(update={"k": 7})),
         )
-    )
+    )  # not its episode's key
     scorer.handle(
         received(
             keys.primary_estimate("tl", E), encode(est.model_copy(update={"k": 6, "sender": "s1"}))
@@ -407,6 +407,50 @@ def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path
     )  # not its key
     assert svc.rejects.total == 5
     assert scorer.store.rows("SELECT count(*) FROM estimates") == [(1,)]
+
+
+def test_the_scorer_holds_what_overtakes_its_episode_start(tmp_path: Path) -> None:
+    """Zenoh orders samples per key only: the truth and an estimate of an episode can arrive
+    before its start. They are kept, and stored once it starts; none is counted as refused."""
+    scorer, svc = _handlers(tmp_path)["scorer"]
+    later = {"episode": "ep-later"}
+    scorer.handle(
+        received(keys.truth("ep-later"), encode(_template("truth").model_copy(update=later)))
+    )
+    scorer.handle(
+        received(
+            keys.primary_estimate("tl", "ep-later"),
+            encode(_template("estimate").model_copy(update=later)),
+        )
+    )
+    count = "SELECT count(*) FROM {} WHERE episode = 'ep-later'"
+    assert scorer.store.rows(count.format("estimates")) == [(0,)]
+    scorer.handle(
+        received(keys.episode("ep-later"), encode(_template("episode").model_copy(update=later)))
+    )
+    assert scorer.store.rows(count.format("truth")) == [(1,)]
+    assert scorer.store.rows(count.format("estimates")) == [(1,)]
+    assert svc.rejects.total == 0
+
+
+def test_the_scorer_counts_what_waits_for_an_episode_that_never_starts(tmp_path: Path) -> None:
+    """The hold is bounded: 64 samples an episode, 4 episodes. A 65th sample, and the samples of
+    the oldest episode once a 5th waits, are counted as unknown_episode, and none is stored."""
+    scorer, svc = _handlers(tmp_path)["scorer"]
+    est = _template("estimate")
+    for k in range(1, 66):
+        update = {"episode": "ep-never", "k": k}
+        scorer.handle(
+            received(keys.primary_estimate("tl", "ep-never"), encode(est.model_copy(update=update)))
+        )
+    assert svc.rejects.count(reason="unknown_episode") == 1
+    for e in ("ep-a", "ep-b", "ep-c", "ep-d"):
+        update = {"episode": e}
+        scorer.handle(
+            received(keys.primary_estimate("tl", e), encode(est.model_copy(update=update)))
+        )
+    assert svc.rejects.count(reason="unknown_episode") == 65
+    assert scorer.store.rows("SELECT count(*) FROM estimates") == [(0,)]
 
 
 # ---- the live flood ---------------------------------------------------------------------------

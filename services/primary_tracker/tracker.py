@@ -114,8 +114,7 @@ class PrimaryTracker:
             return
         ep = self.episodes.get(e)
         if ep is None:
-            if not self.episodes.hold(e, lambda: self._on_transfer(e, sid, key, t)):
-                self.svc.rejects.add(key, "unknown_episode")
+            self.episodes.hold(e, key, lambda: self._on_transfer(e, sid, key, t), self.svc.rejects)
             return
         if t.k_apply < ep.steps.next_k:
             self.svc.rejects.add(key, "late_transfer")

@@ -2,7 +2,9 @@
 
 An episode is scored once it has ended and every filter has reported step K, or once no estimate
 for it has arrived for ``grace_s`` after its end; then the summary table is printed. The current
-summary (all episodes) answers gets on ``tltrack/scorer/summary`` as JSON.
+summary (all episodes) answers gets on ``tltrack/scorer/summary`` as JSON. A truth or an estimate
+that overtakes its episode's start (another key, maybe another route) is held until the start
+arrives (:mod:`tltrack.held`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
+from tltrack.held import Held
 from tltrack.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.services.scorer.store import Store
@@ -53,6 +56,7 @@ class Scorer:
         self.scored: set[str] = {
             e for (e,) in store.rows("SELECT episode FROM episodes WHERE ended IS NOT NULL")
         }
+        self.held = Held()
         self._summary = b"{}"
         self._lock = threading.Lock()
         self.refresh()
@@ -76,14 +80,14 @@ class Scorer:
             self._on_episode(item)
         elif info.kind == "truth":
             truth = decode_received(item, Truth, self.svc.rejects)
-            if truth is not None and self._admissible(item.key, truth, SENSOR_SIM):
+            if truth is not None and self._admissible(item, truth, SENSOR_SIM):
                 self._stored(item.key, self.store.truth(truth))
         elif info.kind in ("source_estimate", "primary_estimate"):
             est = decode_received(item, EstimateMsg, self.svc.rejects)
             owner = info.source if info.kind == "source_estimate" else keys.PRIMARY
             if (
                 est is not None
-                and self._admissible(item.key, est, owner or "")
+                and self._admissible(item, est, owner or "")
                 and self._stored(item.key, self.store.estimate(est, item.t_recv))
             ):
                 self.counts[est.episode][est.filter] += 1
@@ -91,21 +95,25 @@ class Scorer:
         elif info.kind == "stats" and info.operator and info.service:
             self._on_stats(item, info.operator, info.service)
 
-    def _admissible(self, key: str, msg: Truth | EstimateMsg, sender: str) -> bool:
-        """Only the key's owner, about a known episode, for a step 1..K; else counted, dropped."""
+    def _admissible(self, item: Received, msg: Truth | EstimateMsg, sender: str) -> bool:
+        """Only the key's owner, about its key's episode, for a step 1..K; else counted, dropped.
+
+        A sample of an episode not yet started is held, and handled again once it starts.
+        """
         K = self.K.get(msg.episode)
-        reason = (
-            "wrong_sender"
-            if msg.sender != sender
-            else "unknown_episode"
-            if K is None or msg.episode != keys.episode_of(key)
-            else "bad_step"
-            if not 1 <= msg.k <= K
-            else None
-        )
-        if reason is not None:
-            self.svc.rejects.add(key, reason)
-        return reason is None
+        if msg.sender != sender:
+            reason = "wrong_sender"
+        elif msg.episode != keys.episode_of(item.key):
+            reason = "unknown_episode"
+        elif K is None:
+            self.held.hold(msg.episode, item.key, lambda: self.handle(item), self.svc.rejects)
+            return False
+        elif not 1 <= msg.k <= K:
+            reason = "bad_step"
+        else:
+            return True
+        self.svc.rejects.add(item.key, reason)
+        return False
 
     def _stored(self, key: str, inserted: bool) -> bool:
         """A record already stored for its (episode, [filter,] k) is a replay."""
@@ -118,19 +126,23 @@ class Scorer:
         for item in items:
             start = decode_received(item, EpisodeStart, self.svc.rejects)
             if start is not None and self.store.episode_start(start):
-                self.K[start.episode] = start.K
-                self.expected[start.episode] = 2 + len(start.config.get("sources", []))
+                self._started(start)
 
     def _on_episode(self, item: Received) -> None:
         msg = decode_received(item, (EpisodeStart, EpisodeEnd), self.svc.rejects)
         if isinstance(msg, EpisodeEnd):
             self.store.episode_end(msg)
             self.ended[msg.episode] = time.monotonic()
-        elif isinstance(msg, EpisodeStart):
-            if not self._stored(item.key, self.store.episode_start(msg)):
-                return
-            self.K[msg.episode] = msg.K
-            self.expected[msg.episode] = 2 + len(msg.config.get("sources", []))
+        elif isinstance(msg, EpisodeStart) and self._stored(
+            item.key, self.store.episode_start(msg)
+        ):
+            self._started(msg)
+
+    def _started(self, start: EpisodeStart) -> None:
+        self.K[start.episode] = start.K
+        self.expected[start.episode] = 2 + len(start.config.get("sources", []))
+        for later in self.held.release(start.episode):
+            later()
 
     def _on_stats(self, item: Received, operator: str, service: str) -> None:
         try:

@@ -79,8 +79,7 @@ class Sensor:
     def _on_tick(self, e: str, key: str, tick: Tick) -> None:
         z = self.episodes.get(e)
         if z is None:
-            if not self.episodes.hold(e, lambda: self._on_tick(e, key, tick)):
-                self.svc.rejects.add(key, "unknown_episode")
+            self.episodes.hold(e, key, lambda: self._on_tick(e, key, tick), self.svc.rejects)
             return
         if not 1 <= tick.k <= len(z):
             self.svc.rejects.add(key, "too_far")

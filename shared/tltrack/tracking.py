@@ -25,6 +25,7 @@ from tltrack.engine.scenario import initial_estimate
 from tltrack.filters.base import Array, Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
+from tltrack.held import Handling, Held
 from tltrack.messages import (
     EpisodeEnd,
     EpisodeStart,
@@ -349,15 +350,12 @@ class Episodes(Generic[S]):
     :meth:`on_message` hands them back once the episode opens.
     """
 
-    HELD_EPISODES = 4
-    HELD_PER_EPISODE = 64
-
     def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], S | None]) -> None:
         self.capacity = capacity
         self._open = open
         self._state: dict[str, S] = {}
         self._last_k: dict[str, int] = {}
-        self._held: dict[str, list[Callable[[], None]]] = {}
+        self._held = Held()
 
     def handle(self, item: Received, rejects: RejectCounter, recovery: bool) -> None:
         """Act on a sample of an episode key; a replayed start is counted as a duplicate."""
@@ -368,18 +366,11 @@ class Episodes(Generic[S]):
             for later in self.on_message(msg, recovery):
                 later()
 
-    def hold(self, e: str, item: Callable[[], None]) -> bool:
-        """Keep the handling of a message of a not-yet-opened episode; False when full."""
-        if e not in self._held:
-            if len(self._held) >= self.HELD_EPISODES:
-                self._held.pop(next(iter(self._held)))
-            self._held[e] = []
-        if len(self._held[e]) >= self.HELD_PER_EPISODE:
-            return False
-        self._held[e].append(item)
-        return True
+    def hold(self, e: str, key: str, handling: Handling, rejects: RejectCounter) -> None:
+        """Keep the handling of a sample of the not-yet-opened episode ``e`` (:class:`Held`)."""
+        self._held.hold(e, key, handling, rejects)
 
-    def on_message(self, msg: Message, recovery: bool) -> list[Callable[[], None]]:
+    def on_message(self, msg: Message, recovery: bool) -> list[Handling]:
         """Open or end an episode; returns the samples held for an episode it opens.
 
         ``recovery`` is the tracker's own setting, not the episode's.
@@ -398,7 +389,7 @@ class Episodes(Generic[S]):
             self._state.pop(oldest)
             self._last_k.pop(oldest, None)
         self._state[msg.episode] = state
-        return self._held.pop(msg.episode, [])
+        return self._held.release(msg.episode)
 
     def get(self, e: str) -> S | None:
         return self._state.get(e)
@@ -426,8 +417,7 @@ class TrackedEpisodes(Episodes[E]):
         """
         ep = self.get(e)
         if ep is None:
-            if not self.hold(e, lambda: self.offer(e, key, z, rejects)):
-                rejects.add(key, "unknown_episode")
+            self.hold(e, key, lambda: self.offer(e, key, z, rejects), rejects)
             return
         if len(z.z) != ep.n_z:
             rejects.add(key, "bad_shape")

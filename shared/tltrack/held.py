@@ -1,0 +1,47 @@
+"""Messages that overtook the start of their episode.
+
+Zenoh keeps the order of the samples on one key, not across keys, so a measurement, a transfer, a
+truth or an estimate can arrive before the :class:`~tltrack.messages.EpisodeStart` it belongs to,
+above all when they travel different routes (per-operator routers). A service that refused them
+would lose the first steps of an episode for no fault of the sender. :class:`Held` keeps the
+handling of a few such (already validated) messages and hands them back once the episode opens.
+
+Everything comes off the network, so the hold is bounded: a few episodes (the oldest is dropped
+first) and a few messages each. What cannot be held is counted as ``unknown_episode``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from tltrack.messages import RejectCounter
+
+Handling = Callable[[], None]
+
+
+class Held:
+    """Handlings of messages waiting for their episode to open, per episode."""
+
+    def __init__(self, episodes: int = 4, per_episode: int = 64) -> None:
+        self.episodes, self.per_episode = episodes, per_episode
+        self._held: dict[str, list[tuple[str, Handling]]] = {}
+
+    def hold(self, e: str, key: str, handling: Handling, rejects: RejectCounter) -> None:
+        """Keep ``handling`` (of a sample on ``key``) until episode ``e`` opens.
+
+        When ``e`` has no room left, the sample is counted under ``key``; when too many episodes
+        wait, the oldest one's samples are dropped and counted under theirs.
+        """
+        if e not in self._held:
+            if len(self._held) >= self.episodes:
+                for dropped, _ in self._held.pop(next(iter(self._held))):
+                    rejects.add(dropped, "unknown_episode")
+            self._held[e] = []
+        if len(self._held[e]) >= self.per_episode:
+            rejects.add(key, "unknown_episode")
+            return
+        self._held[e].append((key, handling))
+
+    def release(self, e: str) -> list[Handling]:
+        """The handlings held for ``e``, in arrival order, now that it has opened."""
+        return [handling for _, handling in self._held.pop(e, [])]
