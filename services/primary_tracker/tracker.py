@@ -16,12 +16,11 @@ from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import PARTICLE_KINDS, Config, FilterKind
-from tltrack.filters.base import Estimate
 from tltrack.filters.decision import NotComparableError
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import PrimaryEpisode, StepQueue, TrackedEpisodes, publish_estimate
+from tltrack.tracking import PrimaryEpisode, StepQueue, StepReport, TrackedEpisodes
 from tltrack.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -174,42 +173,35 @@ class PrimaryTracker:
         tl = tracker.step(z, transfers)
         tl_ms = (time.perf_counter() - t0) * 1e3
         used = tracker.used_transfer
-        self._publish(e, ep, z, "tl", tl, used, tracker.recovered[0], t_step, tl_ms)
+        StepReport(
+            z,
+            keys.PRIMARY,
+            tracker.tl_name,
+            tracker.layout,
+            tl,
+            used,
+            tracker.recovered[0],
+            t_step,
+            tl_ms,
+        ).publish(self.svc, keys.primary_estimate("tl", e))
         t_twin, t0 = time.time(), time.perf_counter()
         iso = tracker.step_twin()
         iso_ms = (time.perf_counter() - t0) * 1e3
-        iso_recovered = tracker.recovered[1]
-        self._publish(e, ep, z, "isolated", iso, False, iso_recovered, t_twin, iso_ms)
+        StepReport(
+            z,
+            keys.PRIMARY,
+            tracker.iso_name,
+            tracker.layout,
+            iso,
+            False,
+            tracker.recovered[1],
+            t_twin,
+            iso_ms,
+        ).publish(self.svc, keys.primary_estimate("isolated", e))
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
         if tracker.rolled_back:
             self.svc.count("rollbacks_to_isolated")
-
-    def _publish(
-        self,
-        e: str,
-        ep: Episode,
-        z: Measurement,
-        role: str,
-        est: Estimate,
-        used: bool,
-        recovered: bool,
-        t_step: float,
-        step_ms: float,
-    ) -> None:
-        publish_estimate(
-            self.svc,
-            keys.primary_estimate(role, e),
-            z,
-            keys.PRIMARY,
-            ep.tracker.tl_name if role == "tl" else ep.tracker.iso_name,
-            ep.tracker.layout,
-            est,
-            used=used,
-            recovered=recovered,
-            t_step=t_step,
-            step_ms=step_ms,
-        )
 
 
 def main(argv: list[str] | None = None) -> None:

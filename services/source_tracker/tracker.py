@@ -16,8 +16,8 @@ from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import (
     SourceEpisode,
     StepQueue,
+    StepReport,
     TrackedEpisodes,
-    publish_estimate,
     wire_covariance,
 )
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -111,9 +111,7 @@ class SourceTracker:
                     P_eta=wire_covariance(eta.cov[0]),
                 ),
             )
-        publish_estimate(
-            self.svc,
-            keys.source_estimate(sid, e),
+        StepReport(
             z,
             sid,
             ep.tracker.name,
@@ -123,7 +121,7 @@ class SourceTracker:
             recovered=ep.tracker.recovered,
             t_step=t_step,
             step_ms=step_ms,
-        )
+        ).publish(self.svc, keys.source_estimate(sid, e))
         self.svc.count("steps")
 
 

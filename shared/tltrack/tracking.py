@@ -13,7 +13,7 @@ import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache, partial
+from functools import lru_cache
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
@@ -99,70 +99,44 @@ def wire_covariance(P: np.ndarray) -> np.ndarray:
     return 0.5 * (P + P.T)
 
 
-def estimate_message(
-    z: Measurement,
-    sender: str,
-    name: str,
-    layout: Layout,
-    est: Estimate,
-    *,
-    used: bool,
-    recovered: bool,
-    t_step: float,
-    step_ms: float,
-) -> EstimateMsg:
-    """What a tracker publishes for filter ``name``'s estimate at the step of ``z``, begun at
-    ``t_step``; with when ``z`` arrived, these time each stage of the latency."""
-    return EstimateMsg(
-        episode=z.episode,
-        sender=sender,
-        k=z.k,
-        t_sensor=z.t_sensor,
-        filter=name,
-        x=est.mean[0],
-        pos=layout.position(est.mean[0]),
-        P=wire_covariance(est.cov[0]),
-        transfer_used=used,
-        recovered=recovered,
-        t_sent=time.time(),
-        step_ms=step_ms,
-        t_received=z.received_at,
-        t_step=t_step,
-    )
+@dataclass(frozen=True)
+class StepReport:
+    """Filter ``name``'s estimate at the step of ``z``, begun at ``t_step``: what a tracker
+    publishes. With when ``z`` arrived, it times each stage of the latency."""
 
+    z: Measurement
+    sender: str
+    name: str
+    layout: Layout
+    est: Estimate
+    used: bool
+    recovered: bool
+    t_step: float
+    step_ms: float
 
-def publish_estimate(
-    svc: Service,
-    key: str,
-    z: Measurement,
-    sender: str,
-    name: str,
-    layout: Layout,
-    est: Estimate,
-    *,
-    used: bool,
-    recovered: bool,
-    t_step: float,
-    step_ms: float,
-) -> None:
-    """Publish filter ``name``'s estimate at the step of ``z`` on ``key`` (built only when it is
-    sent), and count the step as on track or as a recovery."""
-    svc.publish(
-        key,
-        partial(
-            estimate_message,
-            z,
-            sender,
-            name,
-            layout,
-            est,
-            used=used,
-            recovered=recovered,
-            t_step=t_step,
-            step_ms=step_ms,
-        ),
-    )
-    svc.count("recoveries" if recovered else "steps_on_track")
+    def message(self) -> EstimateMsg:
+        return EstimateMsg(
+            episode=self.z.episode,
+            sender=self.sender,
+            k=self.z.k,
+            t_sensor=self.z.t_sensor,
+            filter=self.name,
+            x=self.est.mean[0],
+            pos=self.layout.position(self.est.mean[0]),
+            P=wire_covariance(self.est.cov[0]),
+            transfer_used=self.used,
+            recovered=self.recovered,
+            t_sent=time.time(),
+            step_ms=self.step_ms,
+            t_received=self.z.received_at,
+            t_step=self.t_step,
+        )
+
+    def publish(self, svc: Service, key: str) -> None:
+        """Publish on ``key`` (the message is built only when it is sent, so that a failure to
+        build counts as a failed publication), and count the step as on track or a recovery."""
+        svc.publish(key, self.message)
+        svc.count("recoveries" if self.recovered else "steps_on_track")
 
 
 class SourceEpisode:
