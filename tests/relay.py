@@ -1,28 +1,57 @@
-"""A TCP relay on one link, on loopback: it keeps a copy of every byte it forwards (what anyone on
-the path between two routers can read), and it can cut the link and restore it."""
+"""A TCP relay on one link: it keeps a copy of every byte it forwards (what anyone on the path
+between two routers can read), and it can cut the link and restore it.
+
+In a test it runs on loopback (``with Relay(target) as r``). Run as a program, it is a relay in a
+container (tests/compose.relay.yaml): ``python relay.py PORT HOST:PORT FILE`` relays port PORT
+of every interface to HOST:PORT and appends every byte it forwards to FILE.
+
+:func:`sentinels` are what the tests look for in those bytes: msgpack encodes each float of a
+message as the 9 bytes 0xcb + its big-endian float64, random enough to be unique to one value.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import socket
+import sys
 import threading
+from typing import BinaryIO
+
+import msgpack
+import numpy as np
+
+
+def sentinels(values: np.ndarray) -> set[bytes]:
+    """How each value travels inside a message."""
+    return {msgpack.packb(float(v)) for v in np.ravel(values)}
+
+
+def found(patterns: set[bytes], wire: bytes) -> int:
+    """How many of ``patterns`` occur in ``wire``."""
+    return sum(p in wire for p in patterns)
 
 
 class Relay:
     """Relays connections from ``port`` to ``target``; use as ``with Relay(target) as r:``."""
 
-    def __init__(self, target: str) -> None:
+    def __init__(
+        self,
+        target: str,
+        listen: tuple[str, int] = ("127.0.0.1", 0),
+        sink: BinaryIO | None = None,
+    ) -> None:
         host, port = target.removeprefix("tcp/").rsplit(":", 1)
         self.target = (host, int(port))
         self.seen = bytearray()
+        self._sink = sink
         self._lock = threading.Lock()
         self._open: list[socket.socket] = []
         self._cut = threading.Event()
         self._stop = threading.Event()
-        self._server = socket.create_server(("127.0.0.1", 0))
+        self._server = socket.create_server(listen)
         self._server.settimeout(0.1)
         self.endpoint = f"tcp/127.0.0.1:{self._server.getsockname()[1]}"
-        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread = threading.Thread(target=self.serve, daemon=True)
 
     def bytes(self) -> bytes:
         with self._lock:
@@ -46,12 +75,16 @@ class Relay:
             while data := a.recv(65536):
                 with self._lock:
                     self.seen.extend(data)
+                    if self._sink is not None:
+                        self._sink.write(data)
+                        self._sink.flush()
                 b.sendall(data)
         for sock in (a, b):
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
 
-    def _serve(self) -> None:
+    def serve(self) -> None:
+        """Accept and relay connections, in this thread, until the relay is closed."""
         while not self._stop.is_set():
             try:
                 client, _ = self._server.accept()
@@ -80,3 +113,12 @@ class Relay:
         self.cut()
         self._thread.join(5)
         self._server.close()
+
+
+def main(port: str, target: str, path: str) -> None:
+    with open(path, "ab") as sink:
+        Relay(target, ("0.0.0.0", int(port)), sink).serve()  # until the container stops
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])

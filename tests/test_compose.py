@@ -3,7 +3,8 @@ partition of the source tracker and its healing, three sources, and a teardown t
 behind. compose.yaml runs a router per operator (the federated topology), each enforcing its
 operator's rules (shared/tltrack/access/routers/); the tests on the host connect as the referee
 to its router, or as the primary to the primary's, with the demo passwords compose.yaml defaults
-to.
+to. The stack runs with tests/compose.relay.yaml on top: a relay on every link between two
+operators' routers, which keeps what crosses it.
 
 Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
 whichever of `docker compose` and `docker-compose` answers. The image is built with
@@ -32,14 +33,25 @@ import numpy as np
 import pytest
 import zenoh
 from livestack import wait_until
+from relay import found, sentinels
 from tltrack import keys
+from tltrack.config import make_config
 from tltrack.demo import IDENTITY, passwords
+from tltrack.engine.scenario import measurements, truth
+from tltrack.models.from_config import motion_model
 from tltrack.transport import Subscriber, ZenohSettings, open_session, query
 
 pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.timeout(900)]
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = ROOT / "compose.yaml"
+RELAY_FILE = ROOT / "tests" / "compose.relay.yaml"  #: a relay on each link between routers
+#: relay service -> the link it sits on, (dialler, dialled)
+RELAYS = {
+    "relay-s1-primary": ("source/s1", "primary"),
+    "relay-s1-referee": ("source/s1", keys.REFEREE),
+    "relay-primary-referee": ("primary", keys.REFEREE),
+}
 PROFILE = ["--profile", "three-sources"]
 IMAGE = os.environ.get("TLTRACK_IMAGE", "tltrack:latest")
 STAMP = ROOT / "build" / "test_compose.stamp"
@@ -189,7 +201,8 @@ class Stack:
         timeout: float = 180,
         check: bool = True,
     ) -> subprocess.CompletedProcess[str]:
-        base = [*self.compose, "-f", str(COMPOSE_FILE), "-p", self.project]
+        files = ["-f", str(COMPOSE_FILE), "-f", str(RELAY_FILE)]
+        base = [*self.compose, *files, "-p", self.project]
         return _run([*base, *args], env={**self.env, **(env or {})}, timeout=timeout, check=check)
 
     def run_sim(self, **env: str) -> None:
@@ -439,8 +452,10 @@ def condensed(logs: str, tail: int = 80) -> str:
 # ---- the tests ---------------------------------------------------------------------------------
 
 
-def test_compose_file_is_valid(compose: list[str]) -> None:
-    proc = _run([*compose, "-f", str(COMPOSE_FILE), "config", "-q"], env=_clean_env())
+@pytest.mark.parametrize("files", [[COMPOSE_FILE], [COMPOSE_FILE, RELAY_FILE]])
+def test_compose_file_is_valid(compose: list[str], files: list[Path]) -> None:
+    flags = [arg for f in files for arg in ("-f", str(f))]
+    proc = _run([*compose, *flags, "config", "-q"], env=_clean_env())
     assert proc.returncode == 0
 
 
@@ -538,6 +553,51 @@ def test_five_episodes_score_and_transfer_helps(stack: Stack) -> None:
     # service's identity, which the ACL grants (and nothing more)
     checked = ("router", "scorer", "primary_tracker", "source_tracker", "dashboard")
     assert stack.wait_healthy(*checked), stack.health()
+
+
+def test_raw_data_never_leaves_its_owners_router_in_containers(
+    stack: Stack, tmp_path: Path
+) -> None:
+    """The five episodes crossed the relays of tests/compose.relay.yaml: no raw measurement of
+    either operator and no truth on any link between routers; the transfers on the source's link
+    to the primary only. Two controls: a tap between the source's sensor and its router sees
+    every one of its measurements, and the source's estimates, which may go to the referee, are
+    all found on that link."""
+    summary = wait_for_summary(
+        stack.endpoint, lambda s: len(scored(s, "main-")) >= EPISODES, timeout=300
+    )
+    assert summary is not None and len(scored(summary, "main-")) == EPISODES, stack.logs()[-6000:]
+
+    def captured(relay: str) -> bytes:
+        path = tmp_path / f"{relay}.bin"
+        _run(["docker", "cp", f"{stack.container(relay)}:/tmp/wire.bin", str(path)])
+        return path.read_bytes()
+
+    wire = {link: captured(relay) for relay, link in RELAYS.items()}
+    tap = captured("relay-s1-sensor")  # between the source's sensor and its own router
+    raw: dict[str, set[bytes]] = {"primary": set(), "s1": set(), "truth": set()}
+    for run, cfg_json in stack.sql("SELECT run, config FROM episodes WHERE episode LIKE 'main-%'"):
+        cfg = make_config(json.loads(cfg_json))
+        x = truth(cfg, run)
+        # the truth's positions: a noise-free truth keeps the turn rate of x0, which the
+        # episode's config (allowed out) carries
+        raw["truth"] |= sentinels(motion_model(cfg).layout.position(x[1:].T))
+        for sid in ("primary", "s1"):
+            raw[sid] |= sentinels(measurements(cfg, run, x, sid))
+    assert all(len(v) >= STEPS for v in raw.values()), {k: len(v) for k, v in raw.items()}
+    estimates = stack.sql(
+        "SELECT x FROM estimates WHERE episode LIKE 'main-%' AND filter = 'source-rpf'"
+    )
+    sent = set().union(*(sentinels(np.array(json.loads(x))) for (x,) in estimates))
+    print({f"{a} -> {b}": f"{len(data)} bytes" for (a, b), data in wire.items()})
+    assert found(raw["s1"], tap) == len(raw["s1"]), "the sentinels are not what travels"
+    assert found(sent, wire["source/s1", keys.REFEREE]) == len(sent), "the capture misses values"
+    for link, data in wire.items():
+        for what, patterns in raw.items():
+            assert found(patterns, data) == 0, f"{what}'s raw data on the link {link}"
+    assert b"\xa8transfer" in wire["source/s1", "primary"], "no transfer on the source's link"
+    assert b"\xa8transfer" not in wire["source/s1", keys.REFEREE]
+    assert b"\xa8transfer" not in wire["primary", keys.REFEREE]
 
 
 def test_the_router_refuses_sessions_without_a_valid_password(stack: Stack) -> None:

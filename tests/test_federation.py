@@ -1,8 +1,8 @@
 """The federated topology with real routers and processes: a router per operator, and a relay on
 every link between routers that keeps each byte it forwards (tests/relay.py).
 
-The sentinels are the raw measurements themselves: msgpack encodes each component of z as the
-9 bytes 0xcb + its big-endian float64, random enough to be unique to one operator's sensor.
+The sentinels are the raw measurements themselves (:func:`relay.sentinels`): each component of z
+travels as its own 9 bytes, unique to one operator's sensor.
 """
 
 from __future__ import annotations
@@ -16,11 +16,10 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-import msgpack
 import numpy as np
 import pytest
 from livestack import estimates, logs, sim_flags, wait_until
-from relay import Relay
+from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
 from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
@@ -39,15 +38,6 @@ SIM = dict(preset="arasaratnam-haykin", truth="fixed", seed=7)
 
 def config(steps: int = K) -> Config:
     return make_config(**SIM, K=steps, particles=N, recovery=True)  # recovery: the trackers'
-
-
-def sentinels(values: np.ndarray) -> set[bytes]:
-    """How each value travels inside a message."""
-    return {msgpack.packb(float(v)) for v in np.ravel(values)}
-
-
-def found(patterns: set[bytes], wire: bytes) -> int:
-    return sum(p in wire for p in patterns)
 
 
 @contextlib.contextmanager
