@@ -38,7 +38,7 @@ run remedies-tuning-s11 --script benchmarks/rpf_remedies.py --runs 200 --seed 11
     --betas 0.1,0.3,0.6,1.0 --json "$OUT/remedies-tuning-s11.json"
 run presets study presets --kind rpf --runs 1000 --out "$OUT/presets"
 run intensities study intensities --kind rpf --runs 1000 --out "$OUT/intensities"
-run robust-rpf study robust --kind rpf --runs 200 --out "$OUT/robust-rpf"
+run robust-rpf study robust --kind rpf --runs 1000 --out "$OUT/robust-rpf"
 run presets-sourcepf study presets --kind rpf --source-filter pf --runs 1000 \
     --out "$OUT/presets-sourcepf"
 run heterogeneous-pf study heterogeneous --runs 200 --out "$OUT/heterogeneous-pf"

@@ -55,7 +55,7 @@ def intensities(setting: Setting, runner: Runner, out: Path) -> Path:
             data[f"{preset} {i}"] = plain(r)
         curves[f"{tl} gain, {preset}"] = gains
     assert cfg is not None
-    lines[1:1] = ["", f"{setting.describe(cfg).split(', ', 2)[2]}; truth fixed.", ""]
+    lines[1:1] = ["", f"{setting.describe(cfg).split(', ', 3)[3]}; truth fixed.", ""]
     plots.curves(
         INTENSITIES,
         curves,
