@@ -2,8 +2,12 @@
 between two routers can read), and it can cut the link and restore it.
 
 In a test it runs on loopback (``with Relay(target) as r``). Run as a program, it is a relay in a
-container (tests/compose.relay.yaml): ``python relay.py PORT HOST:PORT FILE`` relays port PORT
-of every interface to HOST:PORT and appends every byte it forwards to FILE.
+container (tests/compose.relay.yaml): ``python relay.py PORT HOST:PORT DIR`` relays port PORT
+of every interface to HOST:PORT and writes every byte it forwards to a file in DIR.
+
+Each direction of each connection keeps its bytes apart (a list in memory, or a file of its own),
+so that no value is split by the other direction's bytes; :meth:`Relay.bytes` and
+:func:`captured` join them with a separator no sentinel spans.
 
 :func:`sentinels` are what the tests look for in those bytes: msgpack encodes each float of a
 message as the 9 bytes 0xcb + its big-endian float64, random enough to be unique to one value.
@@ -15,7 +19,8 @@ import contextlib
 import socket
 import sys
 import threading
-from typing import BinaryIO
+from collections.abc import Callable
+from pathlib import Path
 
 import msgpack
 import numpy as np
@@ -31,6 +36,14 @@ def found(patterns: set[bytes], wire: bytes) -> int:
     return sum(p in wire for p in patterns)
 
 
+SEPARATOR = b"\n" * 9  #: between two streams: no 9-byte sentinel spans it
+
+
+def captured(directory: Path) -> bytes:
+    """The streams a relay run as a program wrote into ``directory``."""
+    return SEPARATOR.join(p.read_bytes() for p in sorted(directory.glob("*.bin")))
+
+
 class Relay:
     """Relays connections from ``port`` to ``target``; use as ``with Relay(target) as r:``."""
 
@@ -38,12 +51,13 @@ class Relay:
         self,
         target: str,
         listen: tuple[str, int] = ("127.0.0.1", 0),
-        sink: BinaryIO | None = None,
+        out: Path | None = None,
     ) -> None:
         host, port = target.removeprefix("tcp/").rsplit(":", 1)
         self.target = (host, int(port))
-        self.seen = bytearray()
-        self._sink = sink
+        self._out = out  #: where to write the streams; None: keep them in memory
+        self._streams: list[bytearray] = []
+        self._files = 0  #: streams written to ``out``
         self._lock = threading.Lock()
         self._open: list[socket.socket] = []
         self._cut = threading.Event()
@@ -55,7 +69,7 @@ class Relay:
 
     def bytes(self) -> bytes:
         with self._lock:
-            return bytes(self.seen)
+            return SEPARATOR.join(self._streams)
 
     def cut(self) -> None:
         """Drop every connection, and refuse new ones until :meth:`restore`."""
@@ -70,14 +84,27 @@ class Relay:
     def restore(self) -> None:
         self._cut.clear()
 
+    def _stream(self) -> Callable[[bytes], object]:
+        """Where one direction of one connection keeps what it forwards."""
+        with self._lock:
+            if self._out is None:
+                self._streams.append(bytearray())
+                return self._streams[-1].extend
+            self._files += 1
+            path = self._out / f"{self._files:05d}.bin"
+
+        def append(data: bytes) -> None:
+            with path.open("ab") as f:
+                f.write(data)
+
+        return append
+
     def _pipe(self, a: socket.socket, b: socket.socket) -> None:
+        keep = self._stream()
         with contextlib.suppress(OSError):  # the other direction, or cut(), closed both
             while data := a.recv(65536):
                 with self._lock:
-                    self.seen.extend(data)
-                    if self._sink is not None:
-                        self._sink.write(data)
-                        self._sink.flush()
+                    keep(data)
                 b.sendall(data)
         for sock in (a, b):
             with contextlib.suppress(OSError):
@@ -115,9 +142,10 @@ class Relay:
         self._server.close()
 
 
-def main(port: str, target: str, path: str) -> None:
-    with open(path, "ab") as sink:
-        Relay(target, ("0.0.0.0", int(port)), sink).serve()  # until the container stops
+def main(port: str, target: str, directory: str) -> None:
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    Relay(target, ("0.0.0.0", int(port)), out).serve()  # until the container stops
 
 
 if __name__ == "__main__":

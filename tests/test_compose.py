@@ -3,8 +3,9 @@ partition of the source tracker and its healing, three sources, and a teardown t
 behind. compose.yaml runs a router per operator (the federated topology), each enforcing its
 operator's rules (shared/tltrack/access/routers/); the tests on the host connect as the referee
 to its router, or as the primary to the primary's, with the demo passwords compose.yaml defaults
-to. The stack runs with tests/compose.relay.yaml on top: a relay on every link between two
-operators' routers, which keeps what crosses it.
+to. The stack runs with tests/compose.relay.yaml on top: a relay on each of the three links between
+the routers of the referee, the primary and source s1, which keeps what crosses it (the profile
+three-sources' routers s2 and s3 dial directly).
 
 Runs whenever a Docker Engine answers `docker info` (skipped with the reason otherwise), with
 whichever of `docker compose` and `docker-compose` answers. The image is built with
@@ -31,9 +32,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 import zenoh
 from livestack import wait_until
-from relay import found, sentinels
+from relay import captured, found, sentinels
 from tltrack import keys
 from tltrack.config import make_config
 from tltrack.demo import IDENTITY, passwords
@@ -459,6 +461,28 @@ def test_compose_file_is_valid(compose: list[str], files: list[Path]) -> None:
     assert proc.returncode == 0
 
 
+def test_the_relay_overlay_changes_only_where_the_routers_dial(compose: list[str]) -> None:
+    """The stack under test is compose.yaml with tests/compose.relay.yaml: with each relay's name
+    read as the router it relays to, every service of compose.yaml is exactly as compose.yaml
+    says, so what the tests see is what compose.yaml runs."""
+
+    def services(*files: Path) -> dict[str, Any]:
+        flags = [arg for f in files for arg in ("-f", str(f))]
+        proc = _run([*compose, *flags, "config"], env=_clean_env())
+        out = dict(yaml.safe_load(proc.stdout)["services"])
+        for service in out.values():  # one file prints a network without options as {}
+            service["networks"] = {k: v or {} for k, v in service.get("networks", {}).items()}
+        return out
+
+    base, over = services(COMPOSE_FILE), services(COMPOSE_FILE, RELAY_FILE)
+    relays = {name: over[name]["command"][3] for name in over if name.startswith("relay-")}
+    assert set(relays) == {*RELAYS, "relay-s1-sensor"}, relays
+    dialled = json.dumps({name: over[name] for name in base}, sort_keys=True)
+    for relay, target in relays.items():
+        dialled = dialled.replace(f"tcp/{relay}:7447", f"tcp/{target}")
+    assert json.loads(dialled) == json.loads(json.dumps(base, sort_keys=True))
+
+
 def service_env(config: str) -> dict[str, dict[str, str]]:
     """service -> its environment, read from the block YAML that `compose config` prints (both
     tools print `environment` as a mapping: services at indent 2, their keys at 4, entries at 6)."""
@@ -560,21 +584,20 @@ def test_raw_data_never_leaves_its_owners_router_in_containers(
 ) -> None:
     """The five episodes crossed the relays of tests/compose.relay.yaml: no raw measurement of
     either operator and no truth on any link between routers; the transfers on the source's link
-    to the primary only. Two controls: a tap between the source's sensor and its router sees
-    every one of its measurements, and the source's estimates, which may go to the referee, are
-    all found on that link."""
+    to the primary only. The controls: a tap between the source's sensor and its router sees
+    every one of its measurements, and each operator's link to the referee carries every value of
+    its estimates (which may go there), so each capture sees what crosses its link."""
     summary = wait_for_summary(
         stack.endpoint, lambda s: len(scored(s, "main-")) >= EPISODES, timeout=300
     )
     assert summary is not None and len(scored(summary, "main-")) == EPISODES, stack.logs()[-6000:]
 
-    def captured(relay: str) -> bytes:
-        path = tmp_path / f"{relay}.bin"
-        _run(["docker", "cp", f"{stack.container(relay)}:/tmp/wire.bin", str(path)])
-        return path.read_bytes()
+    def wire_of(relay: str) -> bytes:
+        _run(["docker", "cp", f"{stack.container(relay)}:/tmp/wire", str(tmp_path / relay)])
+        return captured(tmp_path / relay)
 
-    wire = {link: captured(relay) for relay, link in RELAYS.items()}
-    tap = captured("relay-s1-sensor")  # between the source's sensor and its own router
+    wire = {link: wire_of(relay) for relay, link in RELAYS.items()}
+    tap = wire_of("relay-s1-sensor")  # between the source's sensor and its own router
     raw: dict[str, set[bytes]] = {"primary": set(), "s1": set(), "truth": set()}
     for run, cfg_json in stack.sql("SELECT run, config FROM episodes WHERE episode LIKE 'main-%'"):
         cfg = make_config(json.loads(cfg_json))
@@ -585,13 +608,22 @@ def test_raw_data_never_leaves_its_owners_router_in_containers(
         for sid in ("primary", "s1"):
             raw[sid] |= sentinels(measurements(cfg, run, x, sid))
     assert all(len(v) >= STEPS for v in raw.values()), {k: len(v) for k, v in raw.items()}
-    estimates = stack.sql(
-        "SELECT x FROM estimates WHERE episode LIKE 'main-%' AND filter = 'source-rpf'"
-    )
-    sent = set().union(*(sentinels(np.array(json.loads(x))) for (x,) in estimates))
+
+    def estimated(name: str) -> set[bytes]:
+        """What the filter ``name`` sent the referee: each value of its estimates."""
+        sql = "SELECT x FROM estimates WHERE episode LIKE 'main-%' AND filter = ?"
+        rows = stack.sql(sql, name)
+        assert len(rows) == EPISODES * STEPS, (name, len(rows))
+        return set().union(*(sentinels(np.array(json.loads(x))) for (x,) in rows))
+
     print({f"{a} -> {b}": f"{len(data)} bytes" for (a, b), data in wire.items()})
     assert found(raw["s1"], tap) == len(raw["s1"]), "the sentinels are not what travels"
-    assert found(sent, wire["source/s1", keys.REFEREE]) == len(sent), "the capture misses values"
+    for name, link in (
+        ("source-rpf", ("source/s1", keys.REFEREE)),
+        ("tl-rpf", ("primary", keys.REFEREE)),
+    ):
+        sent = estimated(name)
+        assert found(sent, wire[link]) == len(sent), f"{name}'s estimates not all seen on {link}"
     for link, data in wire.items():
         for what, patterns in raw.items():
             assert found(patterns, data) == 0, f"{what}'s raw data on the link {link}"

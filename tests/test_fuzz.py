@@ -385,7 +385,7 @@ def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
         assert svc.rejects.count(reason="not_msgpack") == 1, name
 
 
-def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path: Path) -> None:
+def test_the_scorer_refuses_replays_steps_beyond_k_wrong_keys_and_senders(tmp_path: Path) -> None:
     scorer, svc = _handlers(tmp_path)["scorer"]
     truth, est = _template("truth"), _template("estimate")
     for msg, key in ((truth, keys.truth(E)), (est, keys.primary_estimate("tl", E))):
@@ -405,6 +405,10 @@ def test_the_scorer_refuses_replays_steps_beyond_k_and_unknown_episodes(tmp_path
             keys.primary_estimate("tl", E), encode(est.model_copy(update={"k": 6, "sender": "s1"}))
         )
     )  # not its key
+    assert svc.rejects.count(reason="duplicate") == 2
+    assert svc.rejects.count(reason="bad_step") == 1
+    assert svc.rejects.count(reason="unknown_episode") == 1  # on another episode's key
+    assert svc.rejects.count(reason="wrong_sender") == 1
     assert svc.rejects.total == 5
     assert scorer.store.rows("SELECT count(*) FROM estimates") == [(1,)]
 

@@ -42,6 +42,11 @@ class Held:
             return
         self._held[e].append((key, handling))
 
+    def drop(self, e: str, reason: str, rejects: RejectCounter) -> None:
+        """Count what was held for ``e`` under ``reason``: the episode will not open here."""
+        for key, _ in self._held.pop(e, []):
+            rejects.add(key, reason)
+
     def release(self, e: str) -> list[Handling]:
         """The handlings held for ``e``, in arrival order, now that it has opened."""
         return [handling for _, handling in self._held.pop(e, [])]

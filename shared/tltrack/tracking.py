@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -321,8 +322,11 @@ class Episodes(Generic[S]):
 
     Zenoh keeps order per key, not across keys, so a measurement can overtake its episode's start:
     :meth:`hold` keeps the handling of a few such (already validated) messages for later, and
-    :meth:`on_message` hands them back once the episode opens.
+    :meth:`on_message` hands them back once the episode opens. A message of an episode already
+    closed here (retired, evicted or declined) is not held: it is counted as ``episode_closed``.
     """
+
+    CLOSED = 64  #: closed episodes remembered
 
     def __init__(self, capacity: int, open: Callable[[EpisodeStart, Config], S | None]) -> None:
         self.capacity = capacity
@@ -330,6 +334,7 @@ class Episodes(Generic[S]):
         self._state: dict[str, S] = {}
         self._last_k: dict[str, int] = {}
         self._held = Held()
+        self._closed: deque[str] = deque(maxlen=self.CLOSED)
 
     def handle(self, item: Received, rejects: RejectCounter, recovery: bool) -> None:
         """Act on a sample of an episode key; a replayed start is counted as a duplicate."""
@@ -337,15 +342,19 @@ class Episodes(Generic[S]):
         if isinstance(msg, EpisodeStart) and msg.episode in self._state:
             rejects.add(item.key, "duplicate")
         elif msg is not None:
-            for later in self.on_message(msg, recovery):
+            for later in self.on_message(msg, recovery, rejects):
                 later()
 
     def hold(self, e: str, key: str, handling: Handling, rejects: RejectCounter) -> None:
         """Keep the handling of a sample of the not-yet-opened episode ``e`` (:class:`Held`)."""
-        self._held.hold(e, key, handling, rejects)
+        if e in self._closed:
+            rejects.add(key, "episode_closed")
+        else:
+            self._held.hold(e, key, handling, rejects)
 
-    def on_message(self, msg: Message, recovery: bool) -> list[Handling]:
-        """Open or end an episode; returns the samples held for an episode it opens.
+    def on_message(self, msg: Message, recovery: bool, rejects: RejectCounter) -> list[Handling]:
+        """Open or end an episode; returns the samples held for an episode it opens (those
+        held for one it declines are counted as ``episode_closed``).
 
         ``recovery`` is the tracker's own setting, not the episode's.
         """
@@ -357,11 +366,14 @@ class Episodes(Generic[S]):
             return []
         state = self._open(msg, msg.parsed_config().with_(recovery=recovery))
         if state is None:
+            self._held.drop(msg.episode, "episode_closed", rejects)
+            self._closed.append(msg.episode)
             return []
         while len(self._state) >= self.capacity:
             oldest = next(iter(self._state))
             self._state.pop(oldest)
             self._last_k.pop(oldest, None)
+            self._closed.append(oldest)
         self._state[msg.episode] = state
         return self._held.release(msg.episode)
 
@@ -377,6 +389,7 @@ class Episodes(Generic[S]):
         if last is not None and next_k > last:
             del self._state[e]
             del self._last_k[e]
+            self._closed.append(e)
 
 
 class TrackedEpisodes(Episodes[E]):
@@ -386,8 +399,8 @@ class TrackedEpisodes(Episodes[E]):
         """Queue ``z`` in its episode's step order; held while the episode is not yet open.
 
         A measurement of the wrong size for the sensor, a duplicate, a stale step, one far
-        ahead, or one of an episode that never opens (once the hold is full) is counted under
-        its key.
+        ahead, one of an episode closed here, or one the hold cannot keep (:mod:`tltrack.held`)
+        is counted under its key.
         """
         ep = self.get(e)
         if ep is None:

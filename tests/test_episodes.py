@@ -1,0 +1,79 @@
+"""tltrack.tracking.Episodes, the table of episodes every live service keeps: a sample that
+overtakes its episode's start is held and handled once it opens; one of an episode closed here
+(declined, retired or evicted) is counted at once, never held."""
+
+from __future__ import annotations
+
+import time
+
+from doubles import received
+from livestack import SIM_DEFAULTS
+from tltrack import keys
+from tltrack.config import Config, make_config
+from tltrack.messages import EpisodeEnd, EpisodeStart, RejectCounter, encode
+from tltrack.tracking import Episodes
+
+K = 3
+
+
+def _start(e: str) -> bytes:
+    cfg = make_config(**SIM_DEFAULTS, K=K, particles=50).model_dump(mode="json")
+    start = EpisodeStart(
+        episode=e, sender="sensor_sim", k=0, t_sensor=time.time(), run=0, config=cfg, K=K,
+        steps_per_sec=0.0,
+    )  # fmt: skip
+    return encode(start)
+
+
+def _end(e: str) -> bytes:
+    return encode(EpisodeEnd(episode=e, sender="sensor_sim", k=K, t_sensor=0.0, steps_sent=K))
+
+
+def _episodes(capacity: int = 4) -> tuple[Episodes[str], list[str], RejectCounter]:
+    """Episodes whose state is the episode's id; ``ep-declined`` is declined."""
+    handled: list[str] = []
+
+    def open_(start: EpisodeStart, _cfg: Config) -> str | None:
+        return None if start.episode == "ep-declined" else start.episode
+
+    return Episodes(capacity, open_), handled, RejectCounter()
+
+
+def _sample(episodes: Episodes[str], handled: list[str], rejects: RejectCounter, e: str) -> None:
+    """A sample of episode ``e``: handled now if it is open, else offered to the hold."""
+    key = keys.clock(e)
+    if episodes.get(e) is not None:
+        handled.append(e)
+    else:
+        episodes.hold(e, key, lambda: handled.append(e), rejects)
+
+
+def test_a_sample_before_its_start_is_handled_once_the_episode_opens() -> None:
+    episodes, handled, rejects = _episodes()
+    _sample(episodes, handled, rejects, "ep-a")
+    assert handled == []
+    episodes.handle(received(keys.episode("ep-a"), _start("ep-a")), rejects, recovery=False)
+    assert handled == ["ep-a"]
+    assert rejects.total == 0
+
+
+def test_samples_of_a_closed_episode_are_counted_at_once_not_held() -> None:
+    episodes, handled, rejects = _episodes(capacity=1)
+    # declined: what was held for it is counted, and what comes after it too
+    _sample(episodes, handled, rejects, "ep-declined")
+    episodes.handle(
+        received(keys.episode("ep-declined"), _start("ep-declined")), rejects, recovery=False
+    )
+    _sample(episodes, handled, rejects, "ep-declined")
+    # retired: ended, and its last step taken
+    episodes.handle(received(keys.episode("ep-a"), _start("ep-a")), rejects, recovery=False)
+    episodes.handle(received(keys.episode("ep-a"), _end("ep-a")), rejects, recovery=False)
+    episodes.retire("ep-a", K + 1)
+    _sample(episodes, handled, rejects, "ep-a")
+    # evicted: a newer episode took its place (capacity 1)
+    episodes.handle(received(keys.episode("ep-b"), _start("ep-b")), rejects, recovery=False)
+    episodes.handle(received(keys.episode("ep-c"), _start("ep-c")), rejects, recovery=False)
+    _sample(episodes, handled, rejects, "ep-b")
+    assert handled == []
+    assert rejects.count(reason="episode_closed") == 4
+    assert rejects.total == 4
