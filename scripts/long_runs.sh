@@ -52,3 +52,10 @@ for n in 3000 6000 9000 12000; do
         --filters rpf,tl-rpf --particles "$n" --runs 10000 --primary-intensity 4 --seed 0 \
         --out "$OUT/table2-rpf-10000/n$n"
 done
+# The bearing-only pair (examples/bearing-only-primary.toml) on ten seeds: how far TL-PF
+# is from fusion is a property of the pair, or noise of one seed?
+for s in 1 2 3 4 5 6 7 8 9 10; do
+    run "bearing-seed-$s" experiment --config "$ROOT/examples/bearing-only-primary.toml" \
+        --preset arasaratnam-haykin --truth noise-free --filters pf,tl-pf,fusion-pf,ukf,tl-ukf \
+        --particles 6000 --runs 200 --seed "$s" --out "$OUT/bearing-seeds/s$s"
+done
