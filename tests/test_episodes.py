@@ -1,6 +1,7 @@
 """tltrack.tracking.Episodes, the table of episodes every live service keeps: a sample that
 overtakes its episode's start is held and handled once it opens; one of an episode closed here
-(declined, retired or evicted) is counted at once, never held."""
+(declined, retired or evicted) is counted at once, never held; one whose episode never starts is
+counted once it has waited too long (tltrack.held)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from doubles import received
 from livestack import SIM_DEFAULTS
 from tltrack import keys
 from tltrack.config import Config, make_config
+from tltrack.held import Held
 from tltrack.messages import EpisodeEnd, EpisodeStart, RejectCounter, encode
 from tltrack.tracking import Episodes
 
@@ -77,3 +79,16 @@ def test_samples_of_a_closed_episode_are_counted_at_once_not_held() -> None:
     assert handled == []
     assert rejects.count(reason="episode_closed") == 4
     assert rejects.total == 4
+
+
+def test_a_sample_whose_episode_never_starts_is_counted_after_the_ttl() -> None:
+    """Held unread for ever, a forged sample of a made-up episode would never show among the
+    rejected; after ``ttl_s`` it is counted, and its handling is gone."""
+    held, rejects, handled = Held(ttl_s=10.0), RejectCounter(), []
+    held.hold("ep-never", keys.clock("ep-never"), lambda: handled.append(1), rejects)
+    held.expire(rejects, now=time.monotonic() + 5.0)
+    assert rejects.total == 0
+    held.expire(rejects, now=time.monotonic() + 11.0)
+    assert rejects.count(reason="unknown_episode") == 1
+    assert held.release("ep-never") == []
+    assert handled == []

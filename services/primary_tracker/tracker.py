@@ -131,6 +131,7 @@ class PrimaryTracker:
 
     def advance(self) -> float | None:
         """Take every step that can be taken; the seconds until the next deadline, if any."""
+        self.episodes.expire(self.svc.rejects)
         wait: float | None = None
         for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:

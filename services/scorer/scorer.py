@@ -198,6 +198,7 @@ def main(argv: list[str] | None = None) -> None:
                     for item in svc.drain(inbox, timeout=0.2):
                         scorer.handle(item)
                     store.commit()
+                    scorer.held.expire(svc.rejects)
                     scorer.score_finished()
                     if time.monotonic() - last_refresh > 1.0:
                         scorer.refresh()

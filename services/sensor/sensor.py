@@ -129,4 +129,5 @@ def main(argv: list[str] | None = None) -> None:
         while not svc.stop.is_set():
             for item in svc.drain(inbox, timeout=0.2):
                 sensor.handle(item)
+            sensor.episodes.expire(svc.rejects)
             svc.publish_stats()

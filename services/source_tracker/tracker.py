@@ -79,6 +79,7 @@ class SourceTracker:
 
     def advance(self) -> None:
         """Step on every measurement in order; predict through steps missing too long."""
+        self.episodes.expire(self.svc.rejects)
         for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
                 skipped = ep.steps.skip()

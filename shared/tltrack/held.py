@@ -7,11 +7,14 @@ would lose the first steps of an episode for no fault of the sender. :class:`Hel
 handling of a few such (already validated) messages and hands them back once the episode opens.
 
 Everything comes off the network, so the hold is bounded: a few episodes (the oldest is dropped
-first) and a few messages each. What cannot be held is counted as ``unknown_episode``.
+first), a few messages each, and a few seconds (:meth:`Held.expire`; a start is late by
+milliseconds, not seconds). What cannot be held, or waited too long, is counted as
+``unknown_episode``.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 from tltrack.messages import RejectCounter
@@ -22,9 +25,10 @@ Handling = Callable[[], None]
 class Held:
     """Handlings of messages waiting for their episode to open, per episode."""
 
-    def __init__(self, episodes: int = 4, per_episode: int = 64) -> None:
-        self.episodes, self.per_episode = episodes, per_episode
+    def __init__(self, episodes: int = 4, per_episode: int = 64, ttl_s: float = 10.0) -> None:
+        self.episodes, self.per_episode, self.ttl_s = episodes, per_episode, ttl_s
         self._held: dict[str, list[tuple[str, Handling]]] = {}
+        self._since: dict[str, float] = {}  #: episode -> when its first sample was held
 
     def hold(self, e: str, key: str, handling: Handling, rejects: RejectCounter) -> None:
         """Keep ``handling`` (of a sample on ``key``) until episode ``e`` opens.
@@ -34,9 +38,9 @@ class Held:
         """
         if e not in self._held:
             if len(self._held) >= self.episodes:
-                for dropped, _ in self._held.pop(next(iter(self._held))):
-                    rejects.add(dropped, "unknown_episode")
+                self.drop(next(iter(self._held)), "unknown_episode", rejects)
             self._held[e] = []
+            self._since[e] = time.monotonic()
         if len(self._held[e]) >= self.per_episode:
             rejects.add(key, "unknown_episode")
             return
@@ -44,9 +48,18 @@ class Held:
 
     def drop(self, e: str, reason: str, rejects: RejectCounter) -> None:
         """Count what was held for ``e`` under ``reason``: the episode will not open here."""
+        self._since.pop(e, None)
         for key, _ in self._held.pop(e, []):
             rejects.add(key, reason)
 
+    def expire(self, rejects: RejectCounter, now: float | None = None) -> None:
+        """Count and drop the samples of every episode whose start has not come ``ttl_s`` after
+        its first sample: a service calls this in its loop."""
+        now = time.monotonic() if now is None else now
+        for e in [e for e, t in self._since.items() if now - t > self.ttl_s]:
+            self.drop(e, "unknown_episode", rejects)
+
     def release(self, e: str) -> list[Handling]:
         """The handlings held for ``e``, in arrival order, now that it has opened."""
+        self._since.pop(e, None)
         return [handling for _, handling in self._held.pop(e, [])]

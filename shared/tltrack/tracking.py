@@ -352,6 +352,10 @@ class Episodes(Generic[S]):
         else:
             self._held.hold(e, key, handling, rejects)
 
+    def expire(self, rejects: RejectCounter) -> None:
+        """Count what waited too long for an episode that never started (:meth:`Held.expire`)."""
+        self._held.expire(rejects)
+
     def on_message(self, msg: Message, recovery: bool, rejects: RejectCounter) -> list[Handling]:
         """Open or end an episode; returns the samples held for an episode it opens (those
         held for one it declines are counted as ``episode_closed``).
