@@ -1,5 +1,6 @@
 """Test doubles: a sensor and a Kalman filter, linear-Gaussian stand-ins where the KF is exact,
-and a service that is never opened, to drive a service's handlers in-process.
+a service that is never opened, to drive a service's handlers in-process, and the episode
+announcements those handlers need.
 
 :class:`PositionSensor` is a whole new sensor written against the
 :class:`~tltrack.models.base.MeasurementModel` Protocol, outside the package: that it runs through
@@ -15,8 +16,10 @@ from typing import ClassVar
 
 import numpy as np
 import zenoh
+from livestack import SIM_DEFAULTS
 from tltrack import keys
-from tltrack.messages import Message
+from tltrack.config import make_config
+from tltrack.messages import EpisodeEnd, EpisodeStart, Message, encode
 from tltrack.models.base import Layout
 from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.gaussian_sensor import GaussianSensor
@@ -97,3 +100,18 @@ class Offline(Service):
 def received(key: str, payload: bytes) -> Received:
     """A sample as a subscriber hands it over."""
     return Received(key, payload, zenoh.SampleKind.PUT, time.time())
+
+
+def episode_start(e: str, K: int) -> bytes:
+    """sensor_sim's start of episode ``e`` (run 0, K steps, the live stack's defaults), encoded."""
+    cfg = make_config(**SIM_DEFAULTS, K=K, particles=50).model_dump(mode="json")
+    start = EpisodeStart(
+        episode=e, sender="sensor_sim", k=0, t_sensor=time.time(), run=0, config=cfg, K=K,
+        steps_per_sec=0.0,
+    )  # fmt: skip
+    return encode(start)
+
+
+def episode_end(e: str, K: int) -> bytes:
+    """sensor_sim's end of episode ``e`` after its K steps, encoded."""
+    return encode(EpisodeEnd(episode=e, sender="sensor_sim", k=K, t_sensor=0.0, steps_sent=K))

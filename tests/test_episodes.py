@@ -7,28 +7,14 @@ from __future__ import annotations
 
 import time
 
-from doubles import received
-from livestack import SIM_DEFAULTS
+from doubles import episode_end, episode_start, received
 from tltrack import keys
-from tltrack.config import Config, make_config
+from tltrack.config import Config
 from tltrack.held import Held
-from tltrack.messages import EpisodeEnd, EpisodeStart, RejectCounter, encode
+from tltrack.messages import EpisodeStart, RejectCounter
 from tltrack.tracking import Episodes
 
 K = 3
-
-
-def _start(e: str) -> bytes:
-    cfg = make_config(**SIM_DEFAULTS, K=K, particles=50).model_dump(mode="json")
-    start = EpisodeStart(
-        episode=e, sender="sensor_sim", k=0, t_sensor=time.time(), run=0, config=cfg, K=K,
-        steps_per_sec=0.0,
-    )  # fmt: skip
-    return encode(start)
-
-
-def _end(e: str) -> bytes:
-    return encode(EpisodeEnd(episode=e, sender="sensor_sim", k=K, t_sensor=0.0, steps_sent=K))
 
 
 def _episodes(capacity: int = 4) -> tuple[Episodes[str], list[str], RejectCounter]:
@@ -50,11 +36,17 @@ def _sample(episodes: Episodes[str], handled: list[str], rejects: RejectCounter,
         episodes.hold(e, key, lambda: handled.append(e), rejects)
 
 
+def _announce(episodes: Episodes[str], rejects: RejectCounter, e: str, end: bool = False) -> None:
+    """sensor_sim's start of episode ``e``, or its end."""
+    payload = episode_end(e, K) if end else episode_start(e, K)
+    episodes.handle(received(keys.episode(e), payload), rejects, recovery=False)
+
+
 def test_a_sample_before_its_start_is_handled_once_the_episode_opens() -> None:
     episodes, handled, rejects = _episodes()
     _sample(episodes, handled, rejects, "ep-a")
     assert handled == []
-    episodes.handle(received(keys.episode("ep-a"), _start("ep-a")), rejects, recovery=False)
+    _announce(episodes, rejects, "ep-a")
     assert handled == ["ep-a"]
     assert rejects.total == 0
 
@@ -63,18 +55,16 @@ def test_samples_of_a_closed_episode_are_counted_at_once_not_held() -> None:
     episodes, handled, rejects = _episodes(capacity=1)
     # declined: what was held for it is counted, and what comes after it too
     _sample(episodes, handled, rejects, "ep-declined")
-    episodes.handle(
-        received(keys.episode("ep-declined"), _start("ep-declined")), rejects, recovery=False
-    )
+    _announce(episodes, rejects, "ep-declined")
     _sample(episodes, handled, rejects, "ep-declined")
     # retired: ended, and its last step taken
-    episodes.handle(received(keys.episode("ep-a"), _start("ep-a")), rejects, recovery=False)
-    episodes.handle(received(keys.episode("ep-a"), _end("ep-a")), rejects, recovery=False)
+    _announce(episodes, rejects, "ep-a")
+    _announce(episodes, rejects, "ep-a", end=True)
     episodes.retire("ep-a", K + 1)
     _sample(episodes, handled, rejects, "ep-a")
     # evicted: a newer episode took its place (capacity 1)
-    episodes.handle(received(keys.episode("ep-b"), _start("ep-b")), rejects, recovery=False)
-    episodes.handle(received(keys.episode("ep-c"), _start("ep-c")), rejects, recovery=False)
+    _announce(episodes, rejects, "ep-b")
+    _announce(episodes, rejects, "ep-c")
     _sample(episodes, handled, rejects, "ep-b")
     assert handled == []
     assert rejects.count(reason="episode_closed") == 4

@@ -8,32 +8,19 @@ import time
 
 import numpy as np
 import pytest
-from doubles import Offline, received
+from doubles import Offline, episode_end, episode_start, received
 from livestack import SIM_DEFAULTS
 from tltrack import keys
 from tltrack.config import make_config
 from tltrack.engine.scenario import measurements, truth
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, encode
+from tltrack.messages import Measurement, Tick, encode
 from tltrack.services.sensor import sensor as sensor_svc
 
 E, K = "ep-r0", 6
 
 
-def _start() -> bytes:
-    cfg = make_config(**SIM_DEFAULTS, K=K, particles=50).model_dump(mode="json")
-    start = EpisodeStart(
-        episode=E, sender="sensor_sim", k=0, t_sensor=time.time(), run=0, config=cfg, K=K,
-        steps_per_sec=0.0,
-    )  # fmt: skip
-    return encode(start)
-
-
 def _tick(k: int) -> bytes:
     return encode(Tick(episode=E, sender="sensor_sim", k=k, t_sensor=time.time()))
-
-
-def _end() -> bytes:
-    return encode(EpisodeEnd(episode=E, sender="sensor_sim", k=K, t_sensor=0.0, steps_sent=K))
 
 
 ORDERS = {
@@ -49,9 +36,9 @@ def test_every_tick_is_measured_once_whatever_the_order_across_keys(order: str) 
     sensor = sensor_svc.Sensor(sensor_svc.Settings.model_validate({}), svc)
     for what in ORDERS[order]:
         if what == "start":
-            sensor.handle(received(keys.episode(E), _start()))
+            sensor.handle(received(keys.episode(E), episode_start(E, K)))
         elif what == "end":
-            sensor.handle(received(keys.episode(E), _end()))
+            sensor.handle(received(keys.episode(E), episode_end(E, K)))
         else:
             sensor.handle(received(keys.clock(E), _tick(int(what))))
     assert svc.rejects.total == 0

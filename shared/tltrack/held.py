@@ -27,8 +27,8 @@ class Held:
 
     def __init__(self, episodes: int = 4, per_episode: int = 64, ttl_s: float = 10.0) -> None:
         self.episodes, self.per_episode, self.ttl_s = episodes, per_episode, ttl_s
-        self._held: dict[str, list[tuple[str, Handling]]] = {}
-        self._since: dict[str, float] = {}  #: episode -> when its first sample was held
+        #: episode -> (when its first sample was held, its samples: (key, handling))
+        self._held: dict[str, tuple[float, list[tuple[str, Handling]]]] = {}
 
     def hold(self, e: str, key: str, handling: Handling, rejects: RejectCounter) -> None:
         """Keep ``handling`` (of a sample on ``key``) until episode ``e`` opens.
@@ -39,27 +39,25 @@ class Held:
         if e not in self._held:
             if len(self._held) >= self.episodes:
                 self.drop(next(iter(self._held)), "unknown_episode", rejects)
-            self._held[e] = []
-            self._since[e] = time.monotonic()
-        if len(self._held[e]) >= self.per_episode:
+            self._held[e] = (time.monotonic(), [])
+        samples = self._held[e][1]
+        if len(samples) >= self.per_episode:
             rejects.add(key, "unknown_episode")
             return
-        self._held[e].append((key, handling))
+        samples.append((key, handling))
 
     def drop(self, e: str, reason: str, rejects: RejectCounter) -> None:
         """Count what was held for ``e`` under ``reason``: the episode will not open here."""
-        self._since.pop(e, None)
-        for key, _ in self._held.pop(e, []):
+        for key, _ in self._held.pop(e, (0.0, []))[1]:
             rejects.add(key, reason)
 
     def expire(self, rejects: RejectCounter, now: float | None = None) -> None:
         """Count and drop the samples of every episode whose start has not come ``ttl_s`` after
         its first sample: a service calls this in its loop."""
         now = time.monotonic() if now is None else now
-        for e in [e for e, t in self._since.items() if now - t > self.ttl_s]:
+        for e in [e for e, (since, _) in self._held.items() if now - since > self.ttl_s]:
             self.drop(e, "unknown_episode", rejects)
 
     def release(self, e: str) -> list[Handling]:
         """The handlings held for ``e``, in arrival order, now that it has opened."""
-        self._since.pop(e, None)
-        return [handling for _, handling in self._held.pop(e, [])]
+        return [handling for _, handling in self._held.pop(e, (0.0, []))[1]]
