@@ -269,7 +269,9 @@ def test_scheduler_gives_the_local_pools_results_with_batches_on_both_workers(
     cache = c.dir / "numba-a"
     index = {p.name: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")}
     assert any(n.startswith("propagation.") for n in index), sorted(index)  # by the preload
-    assert "tltrack kernels ready" in (c.dir / "a.log").read_text()
+    log_a = (c.dir / "a.log").read_text()
+    assert "tltrack kernels ready" in log_a
+    assert "malloc thresholds: 32 MiB / 64 MiB" in log_a  # the nanny's trim threshold undone
     pids = c.worker_pids()
     with c.client() as client:
         before = len(client.get_task_stream())  # (also starts the scheduler's record of tasks)
