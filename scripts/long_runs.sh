@@ -52,6 +52,16 @@ for n in 3000 6000 9000 12000; do
         --filters rpf,tl-rpf --particles "$n" --runs 10000 --primary-intensity 4 --seed 0 \
         --out "$OUT/table2-rpf-10000/n$n"
 done
+# The lost-track table's rpf rows at 10,000 runs, with the UKF they are held to in the same run:
+# the configs and seed of losses-10000 (whose SIR rows are docs/results/paper-10000/report.md),
+# without its SIR filters, in about a third of its time.
+for p in paper arasaratnam-haykin; do
+    for t in fixed random noise-free; do
+        run "losses-rpf-10000-$p-$t" experiment --scenario ct --preset "$p" --truth "$t" \
+            --filters rpf,tl-rpf,robust-tl-rpf,ukf,tl-ukf --particles 6000 --runs 10000 \
+            --primary-intensity 4 --seed 0 --out "$OUT/losses-rpf-10000/$p-$t"
+    done
+done
 # The bearing-only pair (examples/bearing-only-primary.toml) on ten seeds: how far TL-PF
 # is from fusion is a property of the pair, or noise of one seed?
 for s in 1 2 3 4 5 6 7 8 9 10; do
