@@ -1,7 +1,8 @@
 """A TCP relay on one link: it keeps a copy of every byte it forwards (what anyone on the path
 between two routers can read), and it can cut the link and restore it.
 
-In a test it runs on loopback (``with Relay(target) as r``). Run as a program, it is a relay in a
+In a test it runs on loopback (``with Relay(target) as r``); ``lag_s`` makes the link slow
+towards the dialler. Run as a program, it is a relay in a
 container (tests/compose.relay.yaml): ``python relay.py PORT HOST:PORT DIR`` relays port PORT
 of every interface to HOST:PORT and writes every byte it forwards to a file in DIR.
 
@@ -19,6 +20,7 @@ import contextlib
 import socket
 import sys
 import threading
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -52,10 +54,12 @@ class Relay:
         target: str,
         listen: tuple[str, int] = ("127.0.0.1", 0),
         out: Path | None = None,
+        lag_s: float = 0.0,
     ) -> None:
         host, port = target.removeprefix("tcp/").rsplit(":", 1)
         self.target = (host, int(port))
         self._out = out  #: where to write the streams; None: keep them in memory
+        self.lag_s = lag_s  #: how long each chunk from the target waits before going on
         self._streams: list[bytearray] = []
         self._files = 0  #: streams written to ``out``
         self._lock = threading.Lock()
@@ -99,12 +103,13 @@ class Relay:
 
         return append
 
-    def _pipe(self, a: socket.socket, b: socket.socket) -> None:
+    def _pipe(self, a: socket.socket, b: socket.socket, lag_s: float = 0.0) -> None:
         keep = self._stream()
         with contextlib.suppress(OSError):  # the other direction, or cut(), closed both
             while data := a.recv(65536):
                 with self._lock:
                     keep(data)
+                time.sleep(lag_s)
                 b.sendall(data)
         for sock in (a, b):
             with contextlib.suppress(OSError):
@@ -128,8 +133,8 @@ class Relay:
             upstream.settimeout(None)
             with self._lock:
                 self._open += [client, upstream]
-            for a, b in ((client, upstream), (upstream, client)):
-                threading.Thread(target=self._pipe, args=(a, b), daemon=True).start()
+            for a, b, lag in ((client, upstream, 0.0), (upstream, client, self.lag_s)):
+                threading.Thread(target=self._pipe, args=(a, b, lag), daemon=True).start()
 
     def __enter__(self) -> Relay:
         self._thread.start()

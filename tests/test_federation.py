@@ -41,12 +41,19 @@ def config(steps: int = K) -> Config:
 
 
 @contextlib.contextmanager
-def federation(tmp: Path) -> Iterator[tuple[demo.Stack, dict[tuple[str, str], Relay]]]:
-    """A federated stack whose routers dial each other through relays (not yet started)."""
+def federation(
+    tmp: Path, lag_s: dict[tuple[str, str], float] | None = None
+) -> Iterator[tuple[demo.Stack, dict[tuple[str, str], Relay]]]:
+    """A federated stack whose routers dial each other through relays (not yet started);
+    ``lag_s``: links slow towards their dialler."""
     topo = topology.federated(["s1"])
+    lag = lag_s or {}
     with contextlib.ExitStack() as stack:
         relays = {
-            link: stack.enter_context(Relay(topo.routers[link[1]].endpoint)) for link in LINKS
+            link: stack.enter_context(
+                Relay(topo.routers[link[1]].endpoint, lag_s=lag.get(link, 0.0))
+            )
+            for link in LINKS
         }
         topo = dataclasses.replace(topo, via={link: r.endpoint for link, r in relays.items()})
         s = stack.enter_context(demo.Stack(topo.referee.endpoint, tmp / "logs", topology=topo))
@@ -83,6 +90,7 @@ def run_episode(
         s.start_service(f"sensor_{sid}", service="sensor", identity=user, env=env)
     wait = ["primary:primary_tracker", "referee:scorer", "source/s1:source_tracker"]
     wait += ["primary:sensor", "source/s1:sensor"]
+    s.wait_transfer_routes(["s1"])
     s.start_service(
         "sensor_sim",
         *sim_flags(steps, N, pace=pace),
@@ -158,6 +166,20 @@ def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything
     assert any(k.startswith("tltrack/source/s1/transfer/") for k in got), "no transfer seen"
     assert any(k.startswith("tltrack/primary/meas/") for k in got), "the open router is not open"
     assert found(sentinels(measurements(cfg, 0, truth(cfg, 0), "s1")), wire) == 0
+
+
+def test_a_slow_link_costs_no_transfer(tmp_path):
+    """The primary's subscription reaches the source's router 0.3 s late, long after the tokens
+    sensor_sim awaits: the stack waits for that route (Stack.wait_transfer_routes), so the
+    source's first transfers are not dropped there and the lock-step primary takes every step."""
+    db = tmp_path / "scorer.sqlite"
+    with federation(tmp_path, {("source/s1", "primary"): 0.3}) as (s, _relays):
+        s.start_router()
+        run_episode(s, db, K, 0.0, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"})
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        live = every_step(db, s)
+    assert all(live["tl-rpf"][k][1] for k in range(2, K + 1)), live["tl-rpf"]
 
 
 FAULT_K = 200

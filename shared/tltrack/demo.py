@@ -34,7 +34,7 @@ from tltrack import keys, topology
 from tltrack.config import Config
 from tltrack.topology import ACCESS_DIR, Topology
 from tltrack.topology import free_port as free_port
-from tltrack.transport import ZenohSettings, open_session, query
+from tltrack.transport import Publisher, ZenohSettings, open_session, query
 
 SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
 #: the signals that stop a command and every process it started
@@ -287,7 +287,35 @@ class Stack:
                 env={"TLTRACK_SOURCE_SOURCE_ID": src.id},
             )
             wait.append(f"source/{src.id}:source_tracker")
+        if self.federated:
+            self.wait_transfer_routes([src.id for src in cfg.sources])
         return wait
+
+    def wait_transfer_routes(self, sources: list[str], timeout: float = 60.0) -> None:
+        """Wait until each source's router knows of the primary's subscription to its transfers.
+
+        Routers learn each other's subscribers asynchronously, after the liveliness tokens that
+        sensor_sim awaits may have reached it. A source that steps before its router has heard
+        of the subscription loses its first transfers there, and a lock-step primary then waits
+        for ever. A publisher on the source's transfer key, declared under the source's identity
+        and never sent on, asks that router just this (its matching status).
+        """
+        assert self.topology is not None
+        deadline = time.monotonic() + timeout
+        for sid in sources:
+            user = f"source-{sid}"
+            with (
+                client(self.topology.endpoint(user), user) as session,
+                Publisher(session, keys.transfer(sid, "route-probe")) as probe,
+            ):
+                while not probe.wait_for_subscribers(0.1):
+                    code = self.procs["primary_tracker"].poll()
+                    if code is not None or time.monotonic() > deadline:
+                        why = f"exited with {code}" if code is not None else f"not in {timeout} s"
+                        raise RuntimeError(
+                            f"no route from source {sid} to the primary's tracker ({why}); "
+                            f"see {self.logs / 'primary_tracker.log'}"
+                        )
 
     def start_sensors(self, cfg: Config) -> list[str]:
         """Each operator's sensor, on its operator's router; returns their liveliness tokens."""
