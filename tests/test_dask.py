@@ -40,7 +40,14 @@ from typer.testing import CliRunner
 BIN = Path(sys.executable).parent
 FILTERS = ["pf", "tl-pf", "tl-ukf"]
 #: what results.json holds of each filter, bar the timing (ms_per_step)
-FIELDS = ("rmse_per_step", "rmse_overall", "nees", "lost_fraction", "transfer_rate")
+FIELDS = (
+    "rmse_per_step",
+    "rmse_overall",
+    "nees",
+    "nees_singular_rate",
+    "lost_fraction",
+    "transfer_rate",
+)
 
 
 def small(runs: int = 24, **kw: Any) -> Config:

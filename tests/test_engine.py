@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.engine import results
-from tltrack.engine.montecarlo import run_experiment, run_sweep, trace_run
+from tltrack.engine.montecarlo import nees, run_experiment, run_sweep, trace_run
 from tltrack.engine.scenario import simulate, truth
 
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
@@ -109,3 +109,32 @@ def test_a_sweep_over_the_primary_intensity_equals_separate_experiments():
 def test_a_sweep_refuses_configurations_that_differ_beyond_the_primary():
     with pytest.raises(ValueError, match="particles"):
         run_sweep([_cfg(), _cfg(particles=300)], ["tl-pf"], workers=1)
+
+
+def test_nees_of_a_collapsed_cloud_is_its_spread_directions_not_rounding_noise():
+    """A regular P: exactly the solve's d' P^-1 d. A P of rank 3 (a collapsed cloud's) plus
+    rounding noise: the pseudo-inverse's value, the same whatever that noise (a solve returned
+    values up to 1e40 of either sign). Not finite: NaN."""
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(3, 5, 5))
+    regular = A @ A.transpose(0, 2, 1) + np.eye(5)
+    d = rng.normal(size=(3, 5))
+    solved = np.einsum("bi,bi->b", d, np.linalg.solve(regular, d[:, :, None])[:, :, 0])
+    eps, singular = nees(d, regular)
+    assert np.array_equal(eps, solved) and not singular.any()
+
+    G = rng.normal(size=(5, 3))
+    rank3 = G @ G.T
+    noisy = rank3 + 1e-15 * rng.normal(size=(4, 5, 5))
+    noisy = (noisy + noisy.transpose(0, 2, 1)) / 2
+    e = np.tile(rng.normal(size=5), (4, 1))
+    expected = e[0] @ np.linalg.pinv(rank3) @ e[0]
+    eps, singular = nees(e, noisy)
+    np.testing.assert_allclose(eps, expected, rtol=1e-6)
+    assert singular.all()
+    assert expected > 0
+
+    broken = regular.copy()
+    broken[1, 0, 0] = np.nan
+    got, _ = nees(d, broken)
+    assert np.isnan(got[1]) and np.array_equal(got[[0, 2]], solved[[0, 2]])

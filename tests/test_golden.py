@@ -3,13 +3,16 @@
 The pre-refactor commit is checked out in a git worktree and run beside this tree, on this machine,
 with the same interpreter and libraries: the same small experiment, every filter of both
 scenarios, and the two ``results.json`` must agree exactly (RMSE per step, NEES, lost runs,
-transfer rates, the PCRLB). No golden file is committed: numba and NumPy pick CPU-specific code,
-and one ulp there moves a resampled particle.
+transfer rates, the PCRLB). One later fix is allowed for: where a filter's covariance went
+singular (a collapsed cloud), the NEES is now the pseudo-inverse's, no longer a solve's rounding
+noise, so there it must only be a NEES (not negative). No golden file is committed: numba and
+NumPy pick CPU-specific code, and one ulp there moves a resampled particle.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -70,6 +73,12 @@ def test_every_filter_gives_the_pre_refactor_results_bit_for_bit(
     assert old["provenance"]["git_commit"].startswith(BEFORE)
     assert new["filters"].keys() == old["filters"].keys()
     for name, was in old["filters"].items():
+        now = new["filters"][name]
+        collapsed = now["nees_singular_rate"] > 0
         for field in COMPARED:  # as text: exact, and NaN equals NaN
-            assert json.dumps(new["filters"][name][field]) == json.dumps(was[field]), (name, field)
+            if field == "nees" and collapsed:
+                continue
+            assert json.dumps(now[field]) == json.dumps(was[field]), (name, field)
+        if collapsed:  # a singular P, where the old solve returned rounding noise (test_engine)
+            assert now["nees"] >= 0 or math.isnan(was["nees"]), (name, now["nees"], was["nees"])
     assert json.dumps(new["pcrlb"]) == json.dumps(old["pcrlb"])

@@ -45,6 +45,7 @@ class FilterStats:
     K: int
     sq_err: Array = field(init=False)  # (K,) sum over runs of the squared position error
     nees: Array = field(init=False)  # (K,) sum over runs of the NEES
+    nees_singular: int = 0  # run-steps whose covariance was singular (NEES by pseudo-inverse)
     run_mse: list[Array] = field(default_factory=list)  # per run: mean over k of squared error
     final_err: list[Array] = field(default_factory=list)  # per run: position error at k = K
     step_ms: list[float] = field(default_factory=list)
@@ -58,6 +59,7 @@ class FilterStats:
     def merge(self, other: FilterStats) -> None:
         self.sq_err += other.sq_err
         self.nees += other.nees
+        self.nees_singular += other.nees_singular
         self.run_mse += other.run_mse
         self.final_err += other.final_err
         self.step_ms += other.step_ms
@@ -95,12 +97,27 @@ def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
     return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
 
 
-def nees(d: Array, P: Array) -> Array:
-    """d' P^-1 d per run; a pseudo-inverse where P is singular (a collapsed cloud's is Q_v)."""
-    try:
-        return np.einsum("bi,bi->b", d, np.linalg.solve(P, d[:, :, None])[:, :, 0])
-    except np.linalg.LinAlgError:
-        return np.einsum("bi,bij,bj->b", d, np.linalg.pinv(P, rcond=1e-10, hermitian=True), d)
+def nees(d: Array, P: Array, rcond: float = 1e-10) -> tuple[Array, NDArray[np.bool_]]:
+    """d' P^-1 d per run (NaN where P is not finite), and whether P was singular.
+
+    A collapsed cloud's P is singular up to rounding (its spread is one step's process noise,
+    of rank 3 in CT). A solve does not fail there: it returns rounding noise up to 1e40, of
+    either sign, that also differs between machines. Where the smallest eigenvalue of P is under
+    ``rcond`` times the largest, the pseudo-inverse drops the directions without spread.
+    """
+    out = np.full(len(d), np.nan)
+    finite = np.isfinite(P).all(axis=(1, 2)) & np.isfinite(d).all(axis=1)
+    w = np.linalg.eigvalsh(P[finite])  # ascending
+    regular = np.zeros_like(finite)
+    regular[finite] = w[:, 0] > rcond * w[:, -1]
+    singular = finite & ~regular
+    if regular.any():
+        x = np.linalg.solve(P[regular], d[regular][:, :, None])[:, :, 0]
+        out[regular] = np.einsum("bi,bi->b", d[regular], x)
+    if singular.any():
+        Pinv = np.linalg.pinv(P[singular], rcond=rcond, hermitian=True)
+        out[singular] = np.einsum("bi,bij,bj->b", d[singular], Pinv, d[singular])
+    return out, singular
 
 
 class _Score:
@@ -116,7 +133,9 @@ class _Score:
         d = est.mean - truth_k  # (B, n)
         e2 = d[:, self.pos[0]] ** 2 + d[:, self.pos[1]] ** 2
         self.stats.sq_err[k - 1] += e2.sum()
-        self.stats.nees[k - 1] += nees(d, est.cov).sum()
+        eps, singular = nees(d, est.cov)
+        self.stats.nees[k - 1] += eps.sum()
+        self.stats.nees_singular += int(singular.sum())
         self._sq.append(e2)
         if self._means is not None:
             self._means.append(est.mean)
@@ -321,6 +340,7 @@ class FilterResult:
     rmse_overall: float
     lost_fraction: float
     nees: float
+    nees_singular_rate: float  # share of run-steps whose NEES used a pseudo-inverse (collapse)
     ms_per_step: float | None
     transfer_rate: float  # share of run-steps whose update used a transfer
     run_rmse: list[float]  # per run, sqrt(mean over k of its squared error): paired MC errors
@@ -334,6 +354,7 @@ class FilterResult:
             rmse_overall=float(rmse_k.mean()),
             lost_fraction=float(np.mean(~(final <= lost_threshold))),  # NaN counts as lost
             nees=float(s.nees.sum() / (runs * s.K)),
+            nees_singular_rate=s.nees_singular / (runs * s.K),
             ms_per_step=float(np.median(s.step_ms)) if s.step_ms else None,
             transfer_rate=s.transfer_steps / (runs * s.K),
             run_rmse=np.sqrt(np.concatenate(s.run_mse)).tolist(),
