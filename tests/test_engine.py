@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.engine import results
-from tltrack.engine.montecarlo import nees, run_experiment, run_sweep, trace_run
+from tltrack.engine.montecarlo import (
+    nees,
+    run_experiment,
+    run_sweep,
+    spread_coordinates,
+    trace_run,
+)
 from tltrack.engine.scenario import simulate, truth
 
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
@@ -111,10 +117,10 @@ def test_a_sweep_refuses_configurations_that_differ_beyond_the_primary():
         run_sweep([_cfg(), _cfg(particles=300)], ["tl-pf"], workers=1)
 
 
-def test_nees_of_a_collapsed_cloud_is_its_spread_directions_not_rounding_noise():
+def test_nees_of_a_collapsed_cloud_is_that_of_its_spread_not_rounding_noise():
     """A regular P: exactly the solve's d' P^-1 d. A P of rank 3 (a collapsed cloud's) plus
-    rounding noise: the pseudo-inverse's value, the same whatever that noise (a solve returned
-    values up to 1e40 of either sign). Not finite: NaN."""
+    rounding noise: the NEES of the three coordinates with spread, the same whatever that noise
+    (a solve returned values up to 1e46 of either sign). Not finite: NaN."""
     rng = np.random.default_rng(0)
     A = rng.normal(size=(3, 5, 5))
     regular = A @ A.transpose(0, 2, 1) + np.eye(5)
@@ -128,11 +134,13 @@ def test_nees_of_a_collapsed_cloud_is_its_spread_directions_not_rounding_noise()
     noisy = rank3 + 1e-15 * rng.normal(size=(4, 5, 5))
     noisy = (noisy + noisy.transpose(0, 2, 1)) / 2
     e = np.tile(rng.normal(size=5), (4, 1))
-    expected = e[0] @ np.linalg.pinv(rank3) @ e[0]
+    kept = spread_coordinates(noisy)
+    assert (kept == kept[0]).all() and kept[0].sum() == 3
+    S = np.flatnonzero(kept[0])
+    expected = e[0, S] @ np.linalg.solve(rank3[np.ix_(S, S)], e[0, S])
     eps, singular = nees(e, noisy)
     np.testing.assert_allclose(eps, expected, rtol=1e-6)
-    assert singular.all()
-    assert expected > 0
+    assert singular.all() and expected > 0
 
     broken = regular.copy()
     broken[1, 0, 0] = np.nan

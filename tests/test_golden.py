@@ -4,9 +4,9 @@ The pre-refactor commit is checked out in a git worktree and run beside this tre
 with the same interpreter and libraries: the same small experiment, every filter of both
 scenarios, and the two ``results.json`` must agree exactly (RMSE per step, NEES, lost runs,
 transfer rates, the PCRLB). One later fix is allowed for: where a filter's covariance went
-singular (a collapsed cloud), the NEES is now the pseudo-inverse's, no longer a solve's rounding
-noise, so there it must only be a NEES (not negative). No golden file is committed: numba and
-NumPy pick CPU-specific code, and one ulp there moves a resampled particle.
+singular (a collapsed cloud), the NEES is now that of the coordinates with spread, no longer a
+solve's rounding noise, so there it must only be a NEES (not negative). No golden file is
+committed: numba and NumPy pick CPU-specific code, and one ulp there moves a resampled particle.
 """
 
 from __future__ import annotations

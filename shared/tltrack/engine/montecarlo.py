@@ -45,7 +45,7 @@ class FilterStats:
     K: int
     sq_err: Array = field(init=False)  # (K,) sum over runs of the squared position error
     nees: Array = field(init=False)  # (K,) sum over runs of the NEES
-    nees_singular: int = 0  # run-steps whose covariance was singular (NEES by pseudo-inverse)
+    nees_singular: int = 0  # run-steps whose covariance was singular
     run_mse: list[Array] = field(default_factory=list)  # per run: mean over k of squared error
     final_err: list[Array] = field(default_factory=list)  # per run: position error at k = K
     step_ms: list[float] = field(default_factory=list)
@@ -97,26 +97,52 @@ def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
     return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
 
 
+def spread_coordinates(P: Array, rcond: float = 1e-10) -> NDArray[np.bool_]:
+    """The coordinates a diagonally pivoted LDL' of each P keeps: in turn, the one with the most
+    variance left given those kept so far, while that is over ``rcond`` times P's largest.
+
+    Arithmetic only (no eigensolver, whose last bits follow the C library), so every machine
+    with the same CPU keeps the same coordinates.
+    """
+    B, n, _ = P.shape
+    S = P.copy()
+    keep = np.zeros((B, n), dtype=bool)
+    tol = rcond * np.diagonal(P, axis1=1, axis2=2).max(axis=1)
+    rows = np.arange(B)
+    for _ in range(n):
+        left = np.where(keep, -np.inf, np.diagonal(S, axis1=1, axis2=2))
+        j = left.argmax(axis=1)
+        pivot = left[rows, j]
+        ok = pivot > tol
+        if not ok.any():
+            break
+        col = S[rows, :, j]
+        schur = S - col[:, :, None] * col[:, None, :] / np.where(ok, pivot, 1.0)[:, None, None]
+        S = np.where(ok[:, None, None], schur, S)
+        keep[rows[ok], j[ok]] = True
+    return keep
+
+
 def nees(d: Array, P: Array, rcond: float = 1e-10) -> tuple[Array, NDArray[np.bool_]]:
     """d' P^-1 d per run (NaN where P is not finite), and whether P was singular.
 
     A collapsed cloud's P is singular up to rounding (its spread is one step's process noise,
-    of rank 3 in CT). A solve does not fail there: it returns rounding noise up to 1e40, of
-    either sign, that also differs between machines. Where the smallest eigenvalue of P is under
-    ``rcond`` times the largest, the pseudo-inverse drops the directions without spread.
+    of rank 3 in CT). A solve does not fail there: it returns rounding noise up to 1e46, of
+    either sign, that also differs between machines. There the NEES is that of the coordinates
+    with spread (:func:`spread_coordinates`), d_S' P_SS^-1 d_S.
     """
     out = np.full(len(d), np.nan)
     finite = np.isfinite(P).all(axis=(1, 2)) & np.isfinite(d).all(axis=1)
-    w = np.linalg.eigvalsh(P[finite])  # ascending
-    regular = np.zeros_like(finite)
-    regular[finite] = w[:, 0] > rcond * w[:, -1]
-    singular = finite & ~regular
-    if regular.any():
-        x = np.linalg.solve(P[regular], d[regular][:, :, None])[:, :, 0]
-        out[regular] = np.einsum("bi,bi->b", d[regular], x)
-    if singular.any():
-        Pinv = np.linalg.pinv(P[singular], rcond=rcond, hermitian=True)
-        out[singular] = np.einsum("bi,bij,bj->b", d[singular], Pinv, d[singular])
+    keep = np.ones(d.shape, dtype=bool)
+    keep[finite] = spread_coordinates(P[finite], rcond)
+    singular: NDArray[np.bool_] = finite & ~np.all(keep, axis=1)
+    # a dropped coordinate becomes an independent unit variance with zero error
+    Pk = np.where(keep[:, :, None] & keep[:, None, :], P, np.eye(d.shape[1]))
+    P = np.where(singular[:, None, None], Pk, P)
+    d = np.where(keep, d, 0.0)
+    if finite.any():
+        x = np.linalg.solve(P[finite], d[finite][:, :, None])[:, :, 0]
+        out[finite] = np.einsum("bi,bi->b", d[finite], x)
     return out, singular
 
 
@@ -340,7 +366,7 @@ class FilterResult:
     rmse_overall: float
     lost_fraction: float
     nees: float
-    nees_singular_rate: float  # share of run-steps whose NEES used a pseudo-inverse (collapse)
+    nees_singular_rate: float  # share of run-steps with a singular covariance
     ms_per_step: float | None
     transfer_rate: float  # share of run-steps whose update used a transfer
     run_rmse: list[float]  # per run, sqrt(mean over k of its squared error): paired MC errors
