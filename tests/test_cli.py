@@ -2,7 +2,7 @@ import json
 import re
 
 import pytest
-from tltrack.cli import app
+from tltrack.cli import _print_table, app
 from typer.testing import CliRunner
 
 runner = CliRunner()
@@ -121,3 +121,17 @@ def test_the_bench_times_every_row_side_by_side(tmp_path):
     assert set(timed) >= {"tl-pf", "pf", "source-pf", "tl-rpf", "rpf", "source-rpf", "user-model"}
     assert all(v is not None and v > 0 for v in timed.values()), timed
     assert set(doc["rpf_over_pf"]) == {"", "tl-", "source-"}
+
+
+def test_the_results_table_marks_a_nees_over_a_singular_covariance(capsys):
+    row = {"rmse_overall": 20.0, "lost_fraction": 0.0, "ms_per_step": None}
+    doc = {
+        "filters": {
+            "pf": {**row, "nees": 3.6e7, "nees_singular_rate": 0.01},
+            "rpf": {**row, "nees": 7.646, "nees_singular_rate": 0.0},
+        }
+    }
+    _print_table(doc)
+    out = capsys.readouterr().out
+    assert "3.6e+07*" in out and "7.646 " in out and "7.646*" not in out
+    assert "singular" in out

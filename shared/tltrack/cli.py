@@ -211,7 +211,10 @@ def experiment(
 def _print_table(doc: dict[str, Any]) -> None:
     from rich.table import Table
 
-    t = Table(title="position RMSE (paper's overall definition)")
+    t = Table(
+        title="position RMSE (paper's overall definition)",
+        caption="NEES*: the covariance was singular (a collapsed cloud) on some run-steps",
+    )
     for col in ("filter", "RMSE [m]", "lost", "NEES", "ms/step"):
         t.add_column(col, justify="right" if col != "filter" else "left")
     for name, r in doc["filters"].items():
@@ -220,7 +223,7 @@ def _print_table(doc: dict[str, Any]) -> None:
             name,
             f"{r['rmse_overall']:.2f}",
             f"{r['lost_fraction']:.1%}",
-            f"{r['nees']:.2f}",
+            f"{r['nees']:.4g}{'*' if r['nees_singular_rate'] > 0 else ''}",
             "-" if ms is None else f"{ms:.3f}",
         )
     Console().print(t)
