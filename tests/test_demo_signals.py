@@ -91,7 +91,7 @@ def stop_and_check(
     assert len(kids) >= 5, f"router + 4 services expected, found {kids}"
     rows = committed_rows(db)
     os.kill(proc.pid, sig)
-    limit = 5.0 if sig == signal.SIGKILL else 10.0
+    limit = 10.0  # each child stops on its own SIGTERM, in well under 1 s when not loaded
     t0 = time.monotonic()
     survivors = kids
     while survivors and time.monotonic() - t0 < limit:
