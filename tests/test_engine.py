@@ -4,14 +4,9 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.engine import results
-from tltrack.engine.montecarlo import (
-    nees,
-    run_experiment,
-    run_sweep,
-    spread_coordinates,
-    trace_run,
-)
+from tltrack.engine.montecarlo import nees, run_experiment, run_sweep, trace_run
 from tltrack.engine.scenario import simulate, truth
+from tltrack.filters.kernels.moments import spread_coordinates
 
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
 
@@ -134,7 +129,7 @@ def test_nees_of_a_collapsed_cloud_is_that_of_its_spread_not_rounding_noise():
     noisy = rank3 + 1e-15 * rng.normal(size=(4, 5, 5))
     noisy = (noisy + noisy.transpose(0, 2, 1)) / 2
     e = np.tile(rng.normal(size=5), (4, 1))
-    kept = spread_coordinates(noisy)
+    kept = spread_coordinates(noisy, 1e-10)
     assert (kept == kept[0]).all() and kept[0].sum() == 3
     S = np.flatnonzero(kept[0])
     expected = e[0, S] @ np.linalg.solve(rank3[np.ix_(S, S)], e[0, S])

@@ -29,6 +29,7 @@ from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_n
 from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.decision import TransferPolicy, position_fix
+from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.transfer import Primary, Source
 from tltrack.filters.warm import warm_up
 from tltrack.models.base import Layout, MotionModel
@@ -97,53 +98,29 @@ def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
     return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
 
 
-def spread_coordinates(P: Array, rcond: float = 1e-10) -> NDArray[np.bool_]:
-    """The coordinates a diagonally pivoted LDL' of each P keeps: in turn, the one with the most
-    variance left given those kept so far, while that is over ``rcond`` times P's largest.
-
-    Arithmetic only (no eigensolver, whose last bits follow the C library), so every machine
-    with the same CPU keeps the same coordinates.
-    """
-    B, n, _ = P.shape
-    S = P.copy()
-    keep = np.zeros((B, n), dtype=bool)
-    tol = rcond * np.diagonal(P, axis1=1, axis2=2).max(axis=1)
-    rows = np.arange(B)
-    for _ in range(n):
-        left = np.where(keep, -np.inf, np.diagonal(S, axis1=1, axis2=2))
-        j = left.argmax(axis=1)
-        pivot = left[rows, j]
-        ok = pivot > tol
-        if not ok.any():
-            break
-        col = S[rows, :, j]
-        schur = S - col[:, :, None] * col[:, None, :] / np.where(ok, pivot, 1.0)[:, None, None]
-        S = np.where(ok[:, None, None], schur, S)
-        keep[rows[ok], j[ok]] = True
-    return keep
-
-
 def nees(d: Array, P: Array, rcond: float = 1e-10) -> tuple[Array, NDArray[np.bool_]]:
     """d' P^-1 d per run (NaN where P is not finite), and whether P was singular.
 
     A collapsed cloud's P is singular up to rounding (its spread is one step's process noise,
     of rank 3 in CT). A solve does not fail there: it returns rounding noise up to 1e46, of
     either sign, that also differs between machines. There the NEES is that of the coordinates
-    with spread (:func:`spread_coordinates`), d_S' P_SS^-1 d_S.
+    S with spread (:func:`~tltrack.filters.kernels.moments.spread_coordinates`), d_S' P_SS^-1 d_S.
     """
     out = np.full(len(d), np.nan)
     finite = np.isfinite(P).all(axis=(1, 2)) & np.isfinite(d).all(axis=1)
-    keep = np.ones(d.shape, dtype=bool)
-    keep[finite] = spread_coordinates(P[finite], rcond)
-    singular: NDArray[np.bool_] = finite & ~np.all(keep, axis=1)
-    # a dropped coordinate becomes an independent unit variance with zero error
-    Pk = np.where(keep[:, :, None] & keep[:, None, :], P, np.eye(d.shape[1]))
-    P = np.where(singular[:, None, None], Pk, P)
-    d = np.where(keep, d, 0.0)
-    if finite.any():
-        x = np.linalg.solve(P[finite], d[finite][:, :, None])[:, :, 0]
-        out[finite] = np.einsum("bi,bi->b", d[finite], x)
-    return out, singular
+    if not finite.any():
+        return out, np.zeros(len(d), dtype=bool)
+    P, d = P[finite], d[finite]
+    keep = spread_coordinates(P, rcond)
+    singular = ~keep.all(axis=1)
+    if singular.any():  # a dropped coordinate becomes a unit variance of its own, with no error
+        both = keep[:, :, None] & keep[:, None, :]
+        P = np.where(singular[:, None, None] & ~both, np.eye(d.shape[1]), P)
+        d = np.where(keep, d, 0.0)
+    out[finite] = np.einsum("bi,bi->b", d, np.linalg.solve(P, d[:, :, None])[:, :, 0])
+    everywhere = np.zeros(len(out), dtype=bool)
+    everywhere[finite] = singular
+    return out, everywhere
 
 
 class _Score:

@@ -6,6 +6,7 @@ import numpy as np
 
 from tltrack.filters import fastpath
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
+from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices
 from tltrack.models.observation import Observation
@@ -32,3 +33,4 @@ def warm_up() -> None:
             _ = pf.x
             pf.gaussians()
     systematic_indices(np.full((1, 4), 0.25), rngs)
+    spread_coordinates(np.eye(5)[None], 1e-10)  # the Monte-Carlo engine's NEES

@@ -2,7 +2,8 @@
 
 Two passes (mean, then centred products), normalised by N; the 5-state case unrolled into single
 loops. The weighted variant counts particle j ``cnt[j]`` times: the resampled cloud's moments
-without gathering it.
+without gathering it. :func:`spread_coordinates` says which coordinates of such a covariance
+have spread at all (a collapsed cloud's is singular).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, SUM
+from tltrack.filters.kernels.fastmath import FMA, JIT, SUM
 
 
 @njit(**SUM)
@@ -184,3 +185,37 @@ def _weighted_moments5(
     C[4, 1] = C[1, 4] = c41 / N
     C[4, 2] = C[2, 4] = c42 / N
     C[4, 3] = C[3, 4] = c43 / N
+
+
+@njit(**JIT)
+def spread_coordinates(P: np.ndarray, rcond: float) -> np.ndarray:
+    """The coordinates (B, n) a diagonally pivoted LDL' of each P[b] keeps: in turn, the one with
+    the most variance left given those kept so far, while that is over ``rcond`` times P[b]'s
+    largest variance.
+
+    Plain arithmetic, no contraction and no eigensolver (whose last bits follow the LAPACK
+    kernels picked at run time), so every machine with the same CPU keeps the same coordinates.
+    """
+    B, n, _ = P.shape
+    keep = np.zeros((B, n), dtype=np.bool_)
+    S = np.empty((n, n))
+    col = np.empty(n)
+    for b in range(B):
+        S[:, :] = P[b]
+        tol = P[b, 0, 0]
+        for i in range(1, n):
+            tol = max(tol, P[b, i, i])
+        tol *= rcond
+        for _ in range(n):
+            j, pivot = -1, -np.inf
+            for i in range(n):
+                if not keep[b, i] and S[i, i] > pivot:
+                    j, pivot = i, S[i, i]
+            if not pivot > tol:
+                break
+            col[:] = S[:, j]
+            for r in range(n):
+                for c in range(n):
+                    S[r, c] -= col[r] * col[c] / pivot
+            keep[b, j] = True
+    return keep
