@@ -272,8 +272,9 @@ class Stack:
 
     def start_trackers(self, cfg: Config) -> list[str]:
         """The primary's tracker and one tracker per source of ``cfg``, each under its operator's
-        identity (federated: and each operator's sensor); returns the liveliness tokens
-        (``operator:service``) sensor_sim must await."""
+        identity (federated: and each operator's sensor, and a wait for the transfers' routes,
+        :meth:`wait_transfer_routes`); returns the liveliness tokens (``operator:service``)
+        sensor_sim must await."""
         self.start_service("primary_tracker")
         wait = ["primary:primary_tracker", "referee:scorer"]
         if self.federated:
