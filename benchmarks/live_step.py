@@ -35,7 +35,7 @@ def tl_steps_ms(cfg: Config, kind: str, pause_s: float) -> list[float]:
         primary.step(z["primary"], transfers)
         if k > 1:  # step 1 has no transfer: not a TL step
             out.append((time.perf_counter() - t0) * 1e3)
-        primary.step_twin()
+        primary.step_twin(z["primary"])
         transfers = {
             "s1": Transfer(
                 episode="e",

@@ -1,6 +1,8 @@
 """The four services and a router as real processes over loopback Zenoh."""
 
+import contextlib
 import shutil
+import sqlite3
 import time
 
 import msgpack
@@ -39,6 +41,17 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
         assert not any(used[:3]) and sum(used) >= K // 2, used
     else:
         assert used == [False] + [True] * (K - 1)
+    # the TL estimate goes out first; the isolated twin steps twin_delay_ms (2) later, unless
+    # it stepped inside the robust TL step
+    with contextlib.closing(sqlite3.connect(db)) as con:
+        rows = con.execute(
+            "SELECT twin.t_step - tl.t_sent FROM estimates AS tl JOIN estimates AS twin"
+            " ON tl.episode = twin.episode AND tl.k = twin.k"
+            " WHERE tl.filter = ? AND twin.filter = 'rpf'",
+            (tl,),
+        ).fetchall()
+    assert len(rows) == K
+    assert min(r[0] for r in rows) >= (0.0 if robust else 0.002), rows
     # where the time goes: every estimate timed its stages, and the two hops take time
     for where in [summary, *summary["filters"].values()]:
         stages = where["stages_ms"]

@@ -4,12 +4,16 @@ Step k needs z_k and, from every source of the episode, the transfer with ``k_ap
 primary waits for missing transfers at most ``deadline_ms`` after z_k is ready, and not at all for
 a source whose liveliness token is gone; then it takes the step with what it has (an isolated step
 if nothing). ``lockstep`` waits without a deadline, for tests and exact replays.
+
+The isolated twin is there only for comparison. It steps ``twin_delay_ms`` after the TL estimate
+is out, when that estimate's hops to its receivers no longer compete with it for the CPU.
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 from pydantic import Field
@@ -42,6 +46,9 @@ class Settings(BaseSettings):
     gap_timeout_s: float = Field(
         1.0, gt=0, description="step without a measurement missing this long"
     )
+    twin_delay_ms: float = Field(
+        2.0, ge=0, le=1000, description="step the isolated twin this long after the TL estimate"
+    )
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1)
     log_level: str = "INFO"
@@ -56,6 +63,8 @@ class Episode:
     steps: StepQueue[Measurement] = field(default_factory=StepQueue)
     transfers: dict[int, dict[str, Transfer]] = field(default_factory=dict)
     ready_since: float | None = None  # when z_{next_k} was first ready (monotonic)
+    #: the twin's steps still to take, in order: (z_k or None for a gap, when due, monotonic)
+    twins: deque[tuple[Measurement | None, float]] = field(default_factory=deque)
 
     @property
     def n_z(self) -> int:
@@ -139,7 +148,7 @@ class PrimaryTracker:
                 log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
                 for k in skipped:  # on the clock, but nothing published: a gap, not a guess
                     ep.tracker.step(None, ep.transfers.pop(k, {}))
-                    ep.tracker.step_twin()
+                    self._twin_later(e, ep, None)
                     self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 now = time.monotonic()
@@ -152,7 +161,7 @@ class PrimaryTracker:
                 if waiting and z.k > 1 and not self.s.lockstep:
                     left = ep.ready_since + self.s.deadline_ms / 1e3 - now
                     if left > 0:
-                        wait = left if wait is None else min(wait, left)
+                        wait = _sooner(wait, left)
                         break
                 elif waiting and z.k > 1:
                     break  # lock-step: wait as long as the source lives
@@ -160,7 +169,10 @@ class PrimaryTracker:
                 ep.transfers.pop(z.k, None)
                 ep.ready_since = None
                 self._step(e, ep, z, have)
-            self.episodes.retire(e, ep.steps.next_k)
+            if (due := self._step_twins(e, ep)) is not None:
+                wait = _sooner(wait, due)
+            else:
+                self.episodes.retire(e, ep.steps.next_k)
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:
@@ -168,7 +180,7 @@ class PrimaryTracker:
         return sid in self.alive or sid not in self.seen
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
-        """The TL estimate goes out first; the isolated twin, there only for comparison, after."""
+        """The TL estimate goes out first; the isolated twin's later (:meth:`_step_twins`)."""
         tracker = ep.tracker
         t_step, t0 = time.time(), time.perf_counter()
         tl = tracker.step(z, transfers)
@@ -185,24 +197,47 @@ class PrimaryTracker:
             t_step,
             tl_ms,
         ).publish(self.svc, keys.primary_estimate("tl", e))
-        t_twin, t0 = time.time(), time.perf_counter()
-        iso = tracker.step_twin()
-        iso_ms = (time.perf_counter() - t0) * 1e3
-        StepReport(
-            z,
-            keys.PRIMARY,
-            tracker.iso_name,
-            tracker.layout,
-            iso,
-            False,
-            tracker.recovered[1],
-            t_twin,
-            iso_ms,
-        ).publish(self.svc, keys.primary_estimate("isolated", e))
+        self._twin_later(e, ep, z)
         self.svc.count("steps")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
         if tracker.rolled_back:
             self.svc.count("rollbacks_to_isolated")
+
+    def _twin_later(self, e: str, ep: Episode, z: Measurement | None) -> None:
+        """Queue the twin's step of ``z``. A twin that stepped inside the TL step (robust) has
+        its estimate already, and it goes out at once, before the next step replaces it."""
+        now = ep.tracker.twin_in_step
+        ep.twins.append((z, time.monotonic() + (0.0 if now else self.s.twin_delay_ms / 1e3)))
+        if now:
+            self._step_twins(e, ep)
+
+    def _step_twins(self, e: str, ep: Episode) -> float | None:
+        """Take the twin's steps that are due, in order; the seconds until the next, if any."""
+        while ep.twins:
+            z, due = ep.twins[0]
+            if (left := due - time.monotonic()) > 0:
+                return left
+            ep.twins.popleft()
+            t_twin, t0 = time.time(), time.perf_counter()
+            iso = ep.tracker.step_twin(z)
+            iso_ms = (time.perf_counter() - t0) * 1e3
+            if z is not None:  # a gap's prediction is not published
+                StepReport(
+                    z,
+                    keys.PRIMARY,
+                    ep.tracker.iso_name,
+                    ep.tracker.layout,
+                    iso,
+                    False,
+                    ep.tracker.recovered[1],
+                    t_twin,
+                    iso_ms,
+                ).publish(self.svc, keys.primary_estimate("isolated", e))
+        return None
+
+
+def _sooner(a: float | None, b: float) -> float:
+    return b if a is None else min(a, b)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -223,7 +258,7 @@ def main(argv: list[str] | None = None) -> None:
         while not svc.stop.is_set():
             for item in liveliness.drain():
                 tracker.handle(item)
-            # while a step waits for a transfer, poll liveliness every 20 ms
+            # while a step waits for a transfer or the twin for its turn, poll liveliness at 50 Hz
             for item in svc.drain(inbox, timeout=0.2 if wait is None else min(wait, 0.02)):
                 tracker.handle(item)
             for item in liveliness.drain():

@@ -11,6 +11,7 @@ the file holds this sensor's rows only, as an operator has no other).
 from __future__ import annotations
 
 import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -90,7 +91,7 @@ class Sensor:
                 episode=e,
                 sender=NAME,
                 k=tick.k,
-                t_sensor=tick.t_sensor,
+                t_sensor=time.time(),  # its own time: the tick's hop here is the simulation's
                 sensor=self.s.sensor,
                 z=z[tick.k - 1],
             ),

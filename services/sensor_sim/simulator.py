@@ -165,7 +165,12 @@ class Simulator:
                 self.svc.publish(
                     key,
                     Measurement(
-                        episode=e, sender=NAME, k=k, t_sensor=t, sensor=sid, z=z[sid][k - 1]
+                        episode=e,
+                        sender=NAME,
+                        k=k,
+                        t_sensor=time.time(),  # when this sensor measures: its publication
+                        sensor=sid,
+                        z=z[sid][k - 1],
                     ),
                 )
             self.svc.count("steps")

@@ -2,11 +2,16 @@
 
 Every estimate carries the sensor's timestamp ``t_sensor``, when its tracker received z_k
 (``t_received``), when the step began (``t_step``), the step's duration (``step_ms``) and when it
-was published (``t_sent``); its receiver adds its own arrival time ``t_recv``. The stages (ms):
+was published (``t_sent``); its receiver adds its own arrival time ``t_recv``.
 
-- ``to_tracker``: the sensor's timestamp to the tracker's receipt of z_k (a routed hop);
+``t_sensor`` is when the sensor published z_k. A federated sensor measures when sensor_sim's
+clock ticks, but that tick's hop to the sensor is the simulation's world clock, not a stage of
+the product (a real sensor is its own clock), so it is not counted. The stages (ms):
+
+- ``to_tracker``: the sensor's publication to the tracker's receipt of z_k (a routed hop);
 - ``wait``: receipt to the step's start (the queue, and a primary's wait for the transfer);
-- ``step``: the filter's step (the primary's isolated twin steps after the TL estimate is out);
+- ``step``: the filter's step (the primary's isolated twin steps after the TL estimate is out,
+  so its ``wait`` holds the TL step and the twin's delay);
 - ``publish``: the step's end to the estimate's publication;
 - ``to_receiver``: publication to arrival at the scorer or the dashboard (a routed hop).
 

@@ -192,30 +192,39 @@ class PrimaryEpisode:
             recovery(parse(self.tl_name), cfg),
             twin=self.iso if robust else None,
         )
-        self._obs: Observation | None = None  #: the last step's, for the twin
 
     def step(self, z: Measurement | None, transfers: dict[str, Transfer]) -> Estimate:
-        """The TL estimate at k; ``transfers`` maps source id -> its transfer for k. Then
-        :meth:`step_twin` gives the isolated one: the TL estimate can go out first.
+        """The TL estimate at k; ``transfers`` maps source id -> its transfer for k. The isolated
+        estimate comes from :meth:`step_twin`, so the TL estimate can go out first.
 
         ``z=None``: the primary's own measurement never came; the transfers alone update.
         Transfers come in the engine's order: the episode's sources first, then any other
         source (each transfer describes its own sensor), by id.
         """
-        self._obs = None if z is None else self.sensor.observe(z)
+        obs = None if z is None else self.sensor.observe(z)
         known = [s.id for s in self.cfg.sources]
         order = [*known, *sorted(set(transfers) - set(known))]
         extra = [transfer(transfers[sid], sid, self.layout) for sid in order if sid in transfers]
         if self.tl.policy is not None:  # robust: only what it can judge (check_filters)
             extra = [t for t in extra if isinstance(t.sensor, PositionFix)]
-        return self.tl.step(self._obs, extra)
+        return self.tl.step(obs, extra)
 
-    def step_twin(self) -> Estimate:
-        """The isolated twin's estimate at the step :meth:`step` just took (its own random
-        stream, so the order changes no number)."""
-        if self.tl.twin is not None and self.tl.twin_estimate is not None:
-            return self.tl.twin_estimate  # the twin stepped inside the robust primary
-        return self.iso.step(self._obs)
+    @property
+    def twin_in_step(self) -> bool:
+        """Does :meth:`step` step the twin too? A robust primary judges transfers against it."""
+        return self.tl.twin is not None
+
+    def step_twin(self, z: Measurement | None) -> Estimate:
+        """The isolated twin's estimate at the step of ``z``, the steps taken in order.
+
+        The twin has its own random stream, so when it steps changes no number: a live primary
+        may step it well after the TL estimate is out. If :attr:`twin_in_step`, the twin has
+        already stepped inside :meth:`step`: this is that estimate, so call it before the next
+        :meth:`step`.
+        """
+        if self.tl.twin_estimate is not None:
+            return self.tl.twin_estimate
+        return self.iso.step(None if z is None else self.sensor.observe(z))
 
     @property
     def n_z(self) -> int:
