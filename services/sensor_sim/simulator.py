@@ -53,6 +53,9 @@ class Settings(BaseSettings):
     first_run: int = Field(0, ge=0, description="run index of the first episode")
     episode_prefix: str = Field("ep", pattern=r"^[A-Za-z0-9_-]{1,40}$")
     pace: float = Field(20.0, ge=0, description="steps per second; 0 = as fast as possible")
+    lead_s: float = Field(
+        0.5, ge=0, le=60, description="wait from an episode's start to its first tick"
+    )
     realtime: bool = Field(False, description="pace at one step per Ts")
     replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
     measurements: bool = Field(
@@ -143,6 +146,9 @@ class Simulator:
         log.info("episode %s: run %d, %d steps", e, run, self.cfg.K)
         # a service that (re)starts mid-episode asks for the start it missed
         with Queryable(self.svc.session, keys.episode(e), lambda _params: encode(start)):
+            # Every service opens the episode first; a sensor regenerates its truth from the
+            # seeds (58 ms at K = 5000). Ticks sent meanwhile would queue behind that work.
+            self.svc.stop.wait(self.s.lead_s)
             self._publish_steps(e, z, truth)
 
     def _publish_steps(
