@@ -206,9 +206,10 @@ class PrimaryTracker:
     def _twin_later(self, e: str, ep: Episode, z: Measurement | None) -> None:
         """Queue the twin's step of ``z``. A twin that stepped inside the TL step (robust) has
         its estimate already, and it goes out at once, before the next step replaces it."""
-        now = ep.tracker.twin_in_step
-        ep.twins.append((z, time.monotonic() + (0.0 if now else self.s.twin_delay_ms / 1e3)))
-        if now:
+        inside = ep.tracker.twin_in_step
+        delay = 0.0 if inside else self.s.twin_delay_ms / 1e3
+        ep.twins.append((z, time.monotonic() + delay))
+        if inside:
             self._step_twins(e, ep)
 
     def _step_twins(self, e: str, ep: Episode) -> float | None:
