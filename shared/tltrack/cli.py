@@ -158,6 +158,10 @@ def experiment(
             "--recovery/--no-recovery", help="reinitialise lost particle filters (default: off)"
         ),
     ] = None,
+    rpf_bandwidth: Annotated[
+        float | None,
+        typer.Option(help="rpf: regularisation kernel bandwidth h in [0, 1) (default 0: off)"),
+    ] = None,
     workers: Workers = None,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
@@ -184,6 +188,7 @@ def experiment(
         source_filter=source_filter,
         transfer_budget=transfer_budget,
         recovery=recovery,
+        rpf_bandwidth=rpf_bandwidth,
     )
     names = [n.strip() for n in filters.split(",") if n.strip()]
     try:

@@ -184,6 +184,13 @@ class Config(BaseModel):
         0.999, gt=0, lt=1, description="robust TL: probability an honest transfer passes the gate"
     )
     recovery: bool = Field(False, description="reinitialise a particle filter that lost track")
+    rpf_bandwidth: float = Field(
+        0.0,
+        ge=0,
+        lt=1,
+        allow_inf_nan=False,
+        description="rpf: the regularisation kernel's bandwidth h (0: off; docs/rpf.md)",
+    )
     transfer_budget: float | None = Field(
         None, gt=0, le=1, description="robust TL: at most this share of steps with a transfer"
     )

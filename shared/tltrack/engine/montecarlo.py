@@ -27,7 +27,7 @@ from tltrack.config import PARTICLE_KINDS, Config
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_name
 from tltrack.engine.scenario import simulate
-from tltrack.filters.base import Estimate
+from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import TransferPolicy, position_fix
 from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.transfer import Primary, Source
@@ -51,6 +51,7 @@ class FilterStats:
     final_err: list[Array] = field(default_factory=list)  # per run: position error at k = K
     step_ms: list[float] = field(default_factory=list)
     transfer_steps: int = 0  # run-steps whose update used at least one transfer
+    regularised: int = 0  # run-steps whose cloud an rpf redrew from its kernel
     tracks: list[Array] = field(default_factory=list)  # per batch, (K, B, n) means, on request
 
     def __post_init__(self) -> None:
@@ -65,6 +66,7 @@ class FilterStats:
         self.final_err += other.final_err
         self.step_ms += other.step_ms
         self.transfer_steps += other.transfer_steps
+        self.regularised += other.regularised
         self.tracks += other.tracks
 
 
@@ -260,6 +262,9 @@ def run_sweep_batch(
 
         for v in variants:
             v.step(k, transfers, truth[k], timing)
+    for (name, sid), src in sources.items():
+        label = reported_name(parse(name), sid, len(source_ids))
+        source_scores[label].stats.regularised = _regularised(src.filter)
     source_stats = {name: s.close() for name, s in source_scores.items()}
     # Each configuration reports the shared sources as its own (copies: merges must not alias).
     return [
@@ -317,7 +322,14 @@ class _PrimaryVariant:
                 self.scores[name].stats.transfer_steps += int(prim.used.sum())
 
     def close(self) -> dict[str, FilterStats]:
+        for name, (_spec, prim) in self.primaries.items():
+            self.scores[name].stats.regularised = _regularised(prim.filter)
         return {name: s.close() for name, s in self.scores.items()}
+
+
+def _regularised(filt: Filter) -> int:
+    """Run-steps whose cloud the filter redrew from its regularisation kernel (rpf only)."""
+    return int(np.sum(getattr(filt, "regularised", 0)))
 
 
 def trace_run(cfg: Config, names: Sequence[str], run: int) -> dict[str, Array]:
@@ -346,6 +358,7 @@ class FilterResult:
     nees_singular_rate: float  # share of run-steps with a singular covariance
     ms_per_step: float | None
     transfer_rate: float  # share of run-steps whose update used a transfer
+    regularised_rate: float  # share of run-steps an rpf regularised (rpf_bandwidth > 0)
     run_rmse: list[float]  # per run, sqrt(mean over k of its squared error): paired MC errors
 
     @classmethod
@@ -360,6 +373,7 @@ class FilterResult:
             nees_singular_rate=s.nees_singular / (runs * s.K),
             ms_per_step=float(np.median(s.step_ms)) if s.step_ms else None,
             transfer_rate=s.transfer_steps / (runs * s.K),
+            regularised_rate=s.regularised / (runs * s.K),
             run_rmse=np.sqrt(np.concatenate(s.run_mse)).tolist(),
         )
 

@@ -99,8 +99,11 @@ def build(
     P0 = np.diag(cfg.P0_diag)
     if spec.kind in PARTICLE_KINDS:
         rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id))
-        particles = ParticleFilter if spec.kind == "pf" else AuxiliaryParticleFilter
-        return particles(model, x0_hat, P0, cfg.particles, rngs)
+        if spec.kind == "pf":
+            return ParticleFilter(model, x0_hat, P0, cfg.particles, rngs)
+        return AuxiliaryParticleFilter(
+            model, x0_hat, P0, cfg.particles, rngs, bandwidth=cfg.rpf_bandwidth
+        )
     n = model.n
     rule = {
         "ukf": lambda: unscented(n, cfg.kappa),

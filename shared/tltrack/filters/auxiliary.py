@@ -24,6 +24,22 @@ look-ahead, because l_k(m) ignores the spread L v adds (it would be overconfiden
 the likelihood is sharper than that spread). The estimate is the weighted cloud's mean and
 covariance plus Q_v, as the paper writes the SIR's.
 
+Regularisation (``bandwidth`` h > 0, off by default). Position is nearly deterministic given the
+velocity and the turn rate, so resampling every step can shrink the cloud's genealogy to a few
+ancestors: the cloud then spreads over metres where the posterior spreads over tens of metres,
+and, once the target manoeuvres, it sits beside the measurements with no particle on them
+(docs/rpf.md, "Regularisation"). When the first stage's weights are degenerate (effective sample
+size below ``ess_min`` N), the cloud of x_{k-1} is first redrawn from the Liu-West shrinkage
+kernel (Liu & West 2001; the regularised PF of Musso, Oudjane & Le Gland 2001):
+
+    x_{k-1}^i  <-  a x_{k-1}^i + (1 - a) mu + h D e_i,   a = sqrt(1 - h^2),  D D^T = Sigma,
+
+with (mu, Sigma) the weighted cloud's mean and covariance and e_i ~ N(0, I): the smoothed cloud
+keeps the weighted mean and covariance, and its particles are new. The steps above then run on
+it unchanged, so the weights stay exact for the proposal. The kernel's Gaussians come from a
+child of the run's stream (``Generator.spawn``), drawn only when a run is regularised: with
+h = 0, or on a step that does not fire, every number is the unregularised filter's.
+
 Random numbers, per run and in this order, are the bootstrap filter's: the propagation's
 uniforms in ``predict`` (so a source can preview its predicted cloud, slot i taking noise v_i
 whatever its ancestor, and then propagate with the very same noise), and one uniform in
@@ -49,6 +65,8 @@ Array = NDArray[np.float64]
 
 #: the look-ahead's exponent (docs/rpf.md, "tuning": chosen on seed 11, not on reported seeds)
 BETA = 0.3
+#: regularise a run when its first-stage effective sample size is below this share of N
+ESS_MIN = 0.1
 
 
 class AuxiliaryParticleFilter:
@@ -63,9 +81,17 @@ class AuxiliaryParticleFilter:
         n_particles: int,
         rngs: Sequence[np.random.Generator],
         beta: float = BETA,
+        bandwidth: float = 0.0,
+        ess_min: float = ESS_MIN,
     ) -> None:
         """Draw N particles per run from N(x0_hat[:, b], P0), equally weighted."""
+        if not 0.0 <= bandwidth < 1.0:
+            raise ValueError(f"bandwidth must be in [0, 1), not {bandwidth}")
         self.model, self.rngs, self.N, self.beta = model, list(rngs), n_particles, beta
+        self.bandwidth, self.ess_min = bandwidth, ess_min
+        self._kernel_rngs = [g.spawn(1)[0] for g in self.rngs] if bandwidth > 0 else []
+        #: how many times each run was regularised
+        self.regularised = np.zeros(len(self.rngs), dtype=np.int64)
         n, B = x0_hat.shape
         if len(self.rngs) != B:
             raise ValueError(f"{len(self.rngs)} random streams for a batch of {B} runs")
@@ -109,16 +135,17 @@ class AuxiliaryParticleFilter:
         if not self._pending:
             raise RuntimeError("update() needs predict() first")
         x_prev, (B, N) = self._x, self._logw.shape
-        m = np.empty_like(x_prev)
-        if self._propagate is not None and self._fast(x_prev):
-            self._propagate.mean(x_prev, m)
-        else:
-            m = np.ascontiguousarray(self.model.f(x_prev))
-        la = np.empty((B, N))
-        self._likelihood.into(m, observations, la)
+        la = self._look_ahead(x_prev, observations)
         u = np.array([g.random() for g in self.rngs])
-        ok = np.empty(B, dtype=np.bool_)
-        auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok)
+        ok, ess = np.empty(B, dtype=np.bool_), np.empty(B)
+        auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok, ess)
+        if self.bandwidth > 0:
+            fire = ok & (ess < self.ess_min)
+            fire[list(self._reset)] = False
+            if fire.any():
+                x_prev = self._regularise(x_prev, fire)
+                la = self._look_ahead(x_prev, observations)
+                auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok, ess)
         for b in self._reset:  # a redrawn run takes its new particles as they are
             la[b] = 0.0
             ok[b] = True
@@ -135,6 +162,32 @@ class AuxiliaryParticleFilter:
             mean[~ok], cov[~ok] = np.nan, np.nan
         self._x, self._moments = x, (mean, cov)
         self._pending, self._preview, self._reset = False, None, {}
+
+    def _look_ahead(self, x_prev: Array, observations: Sequence[Observation]) -> Array:
+        """log l_k(f(x_{k-1})), the first stage's look-ahead."""
+        m = np.empty_like(x_prev)
+        if self._propagate is not None and self._fast(x_prev):
+            self._propagate.mean(x_prev, m)
+        else:
+            m = np.ascontiguousarray(self.model.f(x_prev))
+        la = np.empty(self._logw.shape)
+        self._likelihood.into(m, observations, la)
+        return la
+
+    def _regularise(self, x_prev: Array, runs: NDArray[np.bool_]) -> Array:
+        """The cloud with ``runs`` redrawn from the Liu-West shrinkage kernel (module docstring):
+        weighted mean and covariance kept, particles new."""
+        h = self.bandwidth
+        a = np.sqrt(1.0 - h * h)
+        x = np.array(x_prev)
+        w = self._weights()
+        for b in np.flatnonzero(runs):
+            mu, Sigma = (v[0] for v in _weighted_moments(x_prev[:, b : b + 1], w[b : b + 1]))
+            D = _cholesky_psd(Sigma)
+            e = self._kernel_rngs[b].standard_normal((len(mu), self.N))
+            x[:, b] = a * x_prev[:, b] + (1.0 - a) * mu[:, None] + h * (D @ e)
+            self.regularised[b] += 1
+        return x
 
     def estimate(self) -> Estimate:
         """The weighted cloud's mean and covariance, plus Q_v (as the paper's SIR reports)."""
@@ -227,6 +280,16 @@ class AuxiliaryParticleFilter:
     def _apply_reset(self, x: Array) -> None:
         for b, particles in self._reset.items():
             x[:, b, :] = particles
+
+
+def _cholesky_psd(S: Array) -> Array:
+    """A square root D (D D^T = S) of a covariance that may be singular (a cloud whose turn rate
+    or position collapsed): the Cholesky factor when it exists, else the eigen square root."""
+    try:
+        return np.asarray(np.linalg.cholesky(S), dtype=np.float64)
+    except np.linalg.LinAlgError:
+        lam, V = np.linalg.eigh(S)
+        return np.asarray(V * np.sqrt(np.clip(lam, 0.0, None)))
 
 
 def _weighted_moments(x: Array, w: Array) -> tuple[Array, Array]:

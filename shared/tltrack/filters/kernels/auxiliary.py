@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, TRIG_MAX, exp, log, sincos
+from tltrack.filters.kernels.fastmath import FMA, SUM, TRIG_MAX, exp, log, sincos
 from tltrack.filters.kernels.moments import weighted_moments_run
 from tltrack.filters.kernels.resample import largest
 from tltrack.filters.resampling import systematic_walk
@@ -75,6 +75,17 @@ def ct_mean(x: np.ndarray, T: float, small: float, m: np.ndarray) -> None:
                     m[3, b, i] = s * vx + c * vy
 
 
+@njit(**SUM)
+def _ess_share(w: np.ndarray) -> float:
+    """(sum w)^2 / (N sum w^2): the effective sample size of weights w, as a share of N."""
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(w.shape[0]):
+        s1 += w[i]
+        s2 += w[i] * w[i]
+    return s1 * s1 / (s2 * w.shape[0]) if s2 > 0.0 else 0.0
+
+
 @njit(**FMA)
 def first_stage(
     logw: np.ndarray,
@@ -84,9 +95,11 @@ def first_stage(
     anc: np.ndarray,
     row: np.ndarray,
     ok: np.ndarray,
+    ess: np.ndarray,
 ) -> None:
     """Ancestors by the first-stage weights w_{k-1} l_k(f(x_{k-1}))^beta, systematically with
-    the offset u[b]: anc (B, N + 1), ok[b] False where the weights are not finite."""
+    the offset u[b]: anc (B, N + 1), ok[b] False where the weights are not finite, and ess[b]
+    their effective sample size as a share of N."""
     N = logw.shape[1]
     for b in range(logw.shape[0]):
         for i in range(N):
@@ -94,6 +107,7 @@ def first_stage(
         top = largest(row)
         for i in range(N):
             row[i] = exp(row[i] - top)
+        ess[b] = _ess_share(row)
         ok[b] = systematic_walk(row, u[b], anc[b])
 
 
