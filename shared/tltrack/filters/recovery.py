@@ -16,6 +16,7 @@ around the previous mean, and, when the sensor's measurement fixes a position
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -23,10 +24,18 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from tltrack.filters.kernels import resample
+from tltrack.filters.likelihood import Likelihood
 from tltrack.models.base import MotionModel, PositionFix
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
+
+
+@functools.cache
+def _nis_limit(tail: float, n_z: int) -> float:
+    """chi2_{n_z}^{-1}(1 - tail): computed once per (tail, n_z), as scipy takes ~0.1 ms."""
+    return float(chi2.ppf(1.0 - tail, n_z))
 
 
 class Reinitialisable(Protocol):
@@ -50,15 +59,19 @@ class Recovery:
     tail: float = 1e-9
     min_ess: float = 2.0
     count: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    _likelihood: Likelihood | None = field(default=None, init=False, repr=False)
 
     def lost(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
-        d = z.sensor.residual(z.mean[:, :, None], z.sensor.h(pf.x))  # (n_z, B, N)
-        nis = np.einsum("ibn,bij,jbn->bn", d, np.linalg.inv(z.cov), d)
-        nis = np.where(np.isfinite(nis), nis, np.inf)
-        best = np.min(nis, axis=1)
-        w = np.exp(-0.5 * (nis - best[:, None]))
-        ess = w.sum(axis=1) ** 2 / (w**2).sum(axis=1)
-        return ~((best <= chi2.ppf(1.0 - self.tail, z.sensor.n_z)) & (ess >= self.min_ess))
+        x = pf.x
+        if self._likelihood is None or self._likelihood.batch != x.shape[1]:
+            self._likelihood = Likelihood(x.shape[1])
+        B, N = x.shape[1:]
+        rho = np.empty((B, N))
+        self._likelihood.into(x, [z], rho)  # -NIS / 2, by the sensor's kernel where it has one
+        peak, ess = np.empty(B), np.empty(B)
+        resample.peak_and_ess(rho, peak, ess, np.empty(N))
+        best = -2.0 * peak  # the smallest NIS; +inf when no particle's is finite
+        return ~((best <= _nis_limit(self.tail, z.sensor.n_z)) & (ess * N >= self.min_ess))
 
     def __call__(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
         """Reinitialise the lost runs of ``pf`` around ``z``; returns which were."""

@@ -12,9 +12,9 @@ import math
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, SUM, TRIG_MAX, exp, log, sincos
+from tltrack.filters.kernels.fastmath import FMA, TRIG_MAX, exp, log, sincos
 from tltrack.filters.kernels.moments import weighted_moments_run
-from tltrack.filters.kernels.resample import largest
+from tltrack.filters.kernels.resample import ess_share, largest
 from tltrack.filters.resampling import systematic_walk
 
 
@@ -75,17 +75,6 @@ def ct_mean(x: np.ndarray, T: float, small: float, m: np.ndarray) -> None:
                     m[3, b, i] = s * vx + c * vy
 
 
-@njit(**SUM)
-def _ess_share(w: np.ndarray) -> float:
-    """(sum w)^2 / (N sum w^2): the effective sample size of weights w, as a share of N."""
-    s1 = 0.0
-    s2 = 0.0
-    for i in range(w.shape[0]):
-        s1 += w[i]
-        s2 += w[i] * w[i]
-    return s1 * s1 / (s2 * w.shape[0]) if s2 > 0.0 else 0.0
-
-
 @njit(**FMA)
 def first_stage(
     logw: np.ndarray,
@@ -107,7 +96,7 @@ def first_stage(
         top = largest(row)
         for i in range(N):
             row[i] = exp(row[i] - top)
-        ess[b] = _ess_share(row)
+        ess[b] = ess_share(row)
         ok[b] = systematic_walk(row, u[b], anc[b])
 
 

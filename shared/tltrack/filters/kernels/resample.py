@@ -1,12 +1,12 @@
-"""Normalising log-weights and resampling systematically, run by run, with the resampled cloud's
-moments taken from the offspring counts."""
+"""Normalising log-weights, their effective sample size, and resampling systematically, run by
+run, with the resampled cloud's moments taken from the offspring counts."""
 
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, exp
+from tltrack.filters.kernels.fastmath import FMA, SUM, exp
 from tltrack.filters.kernels.moments import weighted_moments_run
 from tltrack.filters.resampling import systematic_walk
 
@@ -27,6 +27,33 @@ def largest(v: np.ndarray) -> float:
     m0 = m1 if m1 > m0 else m0
     m2 = m3 if m3 > m2 else m2
     return m2 if m2 > m0 else m0
+
+
+@njit(**SUM)
+def ess_share(w: np.ndarray) -> float:
+    """(sum w)^2 / (N sum w^2): the effective sample size of weights w >= 0, as a share of N."""
+    s1 = 0.0
+    s2 = 0.0
+    for i in range(w.shape[0]):
+        s1 += w[i]
+        s2 += w[i] * w[i]
+    return s1 * s1 / (s2 * w.shape[0]) if s2 > 0.0 else 0.0
+
+
+@njit(**FMA)
+def peak_and_ess(logw: np.ndarray, peak: np.ndarray, ess: np.ndarray, row: np.ndarray) -> None:
+    """For each run b of log-weights logw (B, N): the largest, peak[b], and the effective sample
+    size of exp(logw[b]), ess[b] (a share of N); entries that are not finite weigh nothing."""
+    for b in range(logw.shape[0]):
+        top = largest(logw[b])
+        peak[b] = top
+        if not (top > -np.inf and top < np.inf):
+            ess[b] = 0.0
+            continue
+        for i in range(logw.shape[1]):
+            e = exp(logw[b, i] - top)
+            row[i] = e if e >= 0.0 else 0.0  # NaN weighs nothing
+        ess[b] = ess_share(row)
 
 
 @njit(**FMA)
