@@ -62,6 +62,12 @@ for p in paper arasaratnam-haykin; do
             --primary-intensity 4 --seed 0 --out "$OUT/losses-rpf-10000/$p-$t"
     done
 done
+# The same cell as losses-rpf-10000-arasaratnam-haykin-random, with the rpf's regularisation on
+# (docs/rpf.md, "Regularisation").
+run regularised-10000-arasaratnam-haykin-random experiment --scenario ct \
+    --preset arasaratnam-haykin --truth random --filters rpf,tl-rpf,robust-tl-rpf,ukf,tl-ukf \
+    --particles 6000 --runs 10000 --primary-intensity 4 --seed 0 --rpf-bandwidth 0.2 \
+    --out "$OUT/regularised-10000/arasaratnam-haykin-random"
 # The bearing-only pair (examples/bearing-only-primary.toml) on ten seeds: how far TL-PF
 # is from fusion is a property of the pair, or noise of one seed?
 for s in 1 2 3 4 5 6 7 8 9 10; do
