@@ -8,6 +8,7 @@ from tltrack.filters import fastpath
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.recovery import Recovery
 from tltrack.filters.resampling import systematic_indices
 from tltrack.models.observation import Observation
 
@@ -26,6 +27,7 @@ def warm_up() -> None:
         for kind in (ParticleFilter, AuxiliaryParticleFilter):
             pf = kind(model, x0, np.eye(n), 8, rngs)
             pf.predict()
+            Recovery(np.eye(n)).lost(pf, z)  # the services' lost-track test
             pf.estimate()
             pf.predicted_observation(sensor, sensor.R(1.0))
             pf.update([z, z])
