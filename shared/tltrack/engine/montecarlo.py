@@ -223,14 +223,14 @@ def run_sweep_batch(
 
     specs = _primaries(names)
     sources: dict[tuple[str, str], Source] = {}
+    labels: dict[tuple[str, str], str] = {}  # each source filter's reported name
     source_scores: dict[str, _Score] = {}
     for name, sid in source_filters(names, cfg):
         spec = parse(name)
         filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
         sources[name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
-        source_scores[reported_name(spec, sid, len(source_ids))] = _Score(
-            K, model.layout, keep_tracks
-        )
+        labels[name, sid] = reported_name(spec, sid, len(source_ids))
+        source_scores[labels[name, sid]] = _Score(K, model.layout, keep_tracks)
     variants = [
         _PrimaryVariant(c, [s.z[PRIMARY] for s in sim], specs, model, x0_hat, runs, keep_tracks)
         for c, sim in zip(cfgs, sims, strict=True)
@@ -242,9 +242,9 @@ def run_sweep_batch(
         for (name, sid), src in sources.items():
             t0 = time.perf_counter()
             est, transfer = src.step(observation(sid, k))
-            label = reported_name(parse(name), sid, len(source_ids))
-            _tick(source_scores[label], timing, t0)
-            source_scores[label].add(k, est, truth[k])
+            score = source_scores[labels[name, sid]]
+            _tick(score, timing, t0)
+            score.add(k, est, truth[k])
             # made at k, applies at k_apply = k + 1; named by its source, as a live one is
             made[name, sid][k + 1] = replace(transfer, origin=sid)
             made[name, sid].pop(k - lag[sid] - 1, None)
@@ -262,9 +262,8 @@ def run_sweep_batch(
 
         for v in variants:
             v.step(k, transfers, truth[k], timing)
-    for (name, sid), src in sources.items():
-        label = reported_name(parse(name), sid, len(source_ids))
-        source_scores[label].stats.regularised = _regularised(src.filter)
+    for key, src in sources.items():
+        source_scores[labels[key]].stats.regularised = _regularised(src.filter)
     source_stats = {name: s.close() for name, s in source_scores.items()}
     # Each configuration reports the shared sources as its own (copies: merges must not alias).
     return [
