@@ -108,6 +108,7 @@ class AuxiliaryParticleFilter:
         self._U = np.empty((B, gaussians.uniforms_per_run(self._r, self.N)))
         self._pending = False  # predict() was called: the propagation waits for update()
         self._preview: Array | None = None  # the unselected predicted cloud, when asked for
+        self._means: Array | None = None  # f(x_{k-1}^i) of the pending step, once computed
         self._reset: dict[int, Array] = {}  # runs a recovery redrew while pending
         self._moments: tuple[Array, Array] | None = None
         self._anc = np.empty((B, self.N + 1), dtype=np.int64)
@@ -128,14 +129,14 @@ class AuxiliaryParticleFilter:
             self._reset = {}
         for b, g in enumerate(self.rngs):
             g.random(out=self._U[b])
-        self._pending, self._preview, self._moments = True, None, None
+        self._pending, self._preview, self._means, self._moments = True, None, None, None
 
     def update(self, observations: Sequence[Observation]) -> None:
         """The two stages on every statement of the step (eqs. in the module docstring)."""
         if not self._pending:
             raise RuntimeError("update() needs predict() first")
         x_prev, (B, N) = self._x, self._logw.shape
-        la = self._look_ahead(x_prev, observations)
+        la = self._look_ahead(self.anchors, observations)
         u = np.array([g.random() for g in self.rngs])
         ok, ess = np.empty(B, dtype=np.bool_), np.empty(B)
         auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok, ess)
@@ -144,7 +145,7 @@ class AuxiliaryParticleFilter:
             fire[list(self._reset)] = False
             if fire.any():
                 x_prev = self._regularise(x_prev, fire)
-                la = self._look_ahead(x_prev, observations)
+                la = self._look_ahead(self._transition_means(x_prev), observations)
                 auxiliary.first_stage(self._logw, la, self.beta, u, self._anc, np.empty(N), ok, ess)
         for b in self._reset:  # a redrawn run takes its new particles as they are
             la[b] = 0.0
@@ -161,15 +162,29 @@ class AuxiliaryParticleFilter:
             self._logw[~ok] = -np.log(N)
             mean[~ok], cov[~ok] = np.nan, np.nan
         self._x, self._moments = x, (mean, cov)
-        self._pending, self._preview, self._reset = False, None, {}
+        self._pending, self._preview, self._means, self._reset = False, None, None, {}
 
-    def _look_ahead(self, x_prev: Array, observations: Sequence[Observation]) -> Array:
-        """log l_k(f(x_{k-1})), the first stage's look-ahead."""
+    @property
+    def anchors(self) -> Array:
+        """m_i = f(x_{k-1}^i) after ``predict``: where the first stage weighs the step's data,
+        so where a lost-track test looks too. Computed once a step and shared with the update
+        (the noisy predicted cloud, :attr:`x`, would be one more propagation). Read-only."""
+        if not self._pending:
+            raise RuntimeError("anchors exist between predict() and update() only")
+        if self._means is None:
+            self._means = self._transition_means(self._x)
+            self._means.flags.writeable = False
+        return self._means
+
+    def _transition_means(self, x_prev: Array) -> Array:
         m = np.empty_like(x_prev)
         if self._propagate is not None and self._fast(x_prev):
             self._propagate.mean(x_prev, m)
-        else:
-            m = np.ascontiguousarray(self.model.f(x_prev))
+            return m
+        return np.ascontiguousarray(self.model.f(x_prev))
+
+    def _look_ahead(self, m: Array, observations: Sequence[Observation]) -> Array:
+        """log l_k(m_i), the first stage's look-ahead."""
         la = np.empty(self._logw.shape)
         self._likelihood.into(m, observations, la)
         return la

@@ -100,6 +100,12 @@ class ParticleFilter:
         self._pre = None
         self._moments = None
 
+    @property
+    def anchors(self) -> Array:
+        """Where a lost-track test weighs z_k after ``predict``: the predicted cloud itself, which
+        the update weighs."""
+        return self._cloud()
+
     def _cloud(self) -> Array:
         """The current cloud, gathered from (pre-resampling cloud, ancestors) if need be."""
         if self._pre is not None:

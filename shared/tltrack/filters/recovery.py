@@ -2,14 +2,16 @@
 
 With the transition prior as proposal and little process noise, a cloud that has collapsed away
 from the object never comes back: every particle explains the measurement equally badly. The test
-is on the primary's own measurement, before the update:
+is on the primary's own measurement, before the update, at the filter's anchors a^(i) (the
+predicted cloud of the SIR; the transition means f(x_{k-1}^(i)) the auxiliary filter's first
+stage weighs, so the test costs it no propagation of its own):
 
-    lost  <=>  min_i (z_k - h(x_k^(i)))' Q_w^-1 (z_k - h(x_k^(i)))  >  chi2_{n_z}^{-1}(1 - 1e-9)
+    lost  <=>  min_i (z_k - h(a^(i)))' Q_w^-1 (z_k - h(a^(i)))  >  chi2_{n_z}^{-1}(1 - 1e-9)
 
 (also when the cloud holds a non-finite value), or when z_k alone would leave fewer than
 ``min_ess`` effective particles: the weights of all but one underflow, as after a long outage
 whose predictions spread the cloud thin. A lost run's particles are redrawn with the spread of P0
-around the previous mean, and, when the sensor's measurement fixes a position
+around the anchors' mean, and, when the sensor's measurement fixes a position
 (:class:`~tltrack.models.base.PositionFix`), with their position drawn around the one z_k implies
 (its linearised covariance). The paper's experiments keep it off, so lost runs count.
 """
@@ -46,7 +48,7 @@ class Reinitialisable(Protocol):
     N: int
 
     @property
-    def x(self) -> Array: ...
+    def anchors(self) -> Array: ...
 
     def reinitialise(self, b: int, particles: Array) -> None: ...
 
@@ -62,7 +64,7 @@ class Recovery:
     _likelihood: Likelihood | None = field(default=None, init=False, repr=False)
 
     def lost(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
-        x = pf.x
+        x = pf.anchors
         if self._likelihood is None or self._likelihood.batch != x.shape[1]:
             self._likelihood = Likelihood(x.shape[1])
         B, N = x.shape[1:]
@@ -85,10 +87,11 @@ class Recovery:
 
     def _redraw(self, pf: Reinitialisable, z: Observation, b: int) -> None:
         g = pf.rngs[b]
-        finite = np.all(np.isfinite(pf.x[:, b, :]), axis=0)
-        mean = pf.x[:, b, finite].mean(axis=1) if finite.any() else np.zeros(pf.x.shape[0])
+        anchors = pf.anchors[:, b, :]
+        finite = np.all(np.isfinite(anchors), axis=0)
+        mean = anchors[:, finite].mean(axis=1) if finite.any() else np.zeros(anchors.shape[0])
         L = np.linalg.cholesky(self.P0)
-        x = mean[:, None] + L @ g.standard_normal((pf.x.shape[0], pf.N))
+        x = mean[:, None] + L @ g.standard_normal((len(mean), pf.N))
         if isinstance(z.sensor, PositionFix):
             pos, S = z.sensor.to_position(z.mean[:, b : b + 1], z.cov[b : b + 1])
             p = pos[:, 0, None] + np.linalg.cholesky(S[0]) @ g.standard_normal((2, pf.N))
