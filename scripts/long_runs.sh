@@ -79,3 +79,15 @@ for s in 1 2 3 4 5 6 7 8 9 10; do
         --preset arasaratnam-haykin --truth noise-free --filters pf,tl-pf,fusion-pf,ukf,tl-ukf \
         --particles 6000 --runs 200 --seed "$s" --out "$OUT/bearing-seeds/s$s"
 done
+# The presets study's one cell where tl-rpf trails tl-ukf (arasaratnam-haykin, truth seed 4):
+# each TL filter fed by a source of its own kind, then the source's kind crossed.
+PAIRING=(--scenario ct --preset arasaratnam-haykin --truth fixed --truth-seed 4 --particles 6000
+    --runs 1000 --primary-intensity 4 --seed 0)
+run pairing-ah-fixed4-own experiment "${PAIRING[@]}" --filters rpf,tl-rpf,ukf,tl-ukf \
+    --out "$OUT/pairing-ah-fixed4/own"
+run pairing-ah-fixed4-tl-rpf-src-ukf experiment "${PAIRING[@]}" --filters tl-rpf \
+    --source-filter ukf --out "$OUT/pairing-ah-fixed4/tl-rpf-src-ukf"
+run pairing-ah-fixed4-tl-ukf-src-rpf experiment "${PAIRING[@]}" --filters tl-ukf \
+    --source-filter rpf --out "$OUT/pairing-ah-fixed4/tl-ukf-src-rpf"
+run pairing-ah-fixed4-own-h05 experiment "${PAIRING[@]}" --filters rpf,tl-rpf,ukf,tl-ukf \
+    --rpf-bandwidth 0.5 --out "$OUT/pairing-ah-fixed4/own-h05"
