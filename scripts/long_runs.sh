@@ -92,3 +92,5 @@ run pairing-ah-fixed4-tl-ukf-src-rpf experiment "${PAIRING[@]}" --filters tl-ukf
 run pairing-ah-fixed4-own-h05 experiment "${PAIRING[@]}" --filters rpf,tl-rpf,ukf,tl-ukf \
     --rpf-bandwidth 0.5 --out "$OUT/pairing-ah-fixed4/own-h05"
 run turn-bias-ah-fixed4 --script benchmarks/turn_bias.py --runs 100 --truth-seed 4
+run turn-bias-ah-fixed4-n24000 --script benchmarks/turn_bias.py --runs 100 --truth-seed 4 \
+    --particles 24000
