@@ -94,3 +94,7 @@ run pairing-ah-fixed4-own-h05 experiment "${PAIRING[@]}" --filters rpf,tl-rpf,uk
 run turn-bias-ah-fixed4 --script benchmarks/turn_bias.py --runs 100 --truth-seed 4
 run turn-bias-ah-fixed4-n24000 --script benchmarks/turn_bias.py --runs 100 --truth-seed 4 \
     --particles 24000
+# The divergent runs of the a-h random lost-track cell (run RMSE past 500 m), rerun at 4N.
+run divergent-runs-ah-random --script benchmarks/divergent_runs.py \
+    "$ROOT/docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json" \
+    --particles 6000,24000
