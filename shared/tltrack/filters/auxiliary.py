@@ -58,6 +58,7 @@ from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import auxiliary, gaussians
 from tltrack.filters.likelihood import Likelihood
+from tltrack.filters.particle import initial_cloud
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 
@@ -92,14 +93,8 @@ class AuxiliaryParticleFilter:
         self._kernel_rngs = [g.spawn(1)[0] for g in self.rngs] if bandwidth > 0 else []
         #: how many times each run was regularised
         self.regularised = np.zeros(len(self.rngs), dtype=np.int64)
-        n, B = x0_hat.shape
-        if len(self.rngs) != B:
-            raise ValueError(f"{len(self.rngs)} random streams for a batch of {B} runs")
-        L0 = np.linalg.cholesky(P0)
-        eps = np.empty((n, B, self.N))
-        for b, g in enumerate(self.rngs):
-            eps[:, b, :] = g.standard_normal((n, self.N))
-        self._x: Array = np.ascontiguousarray(x0_hat[:, :, None] + np.tensordot(L0, eps, axes=1))
+        B = x0_hat.shape[1]
+        self._x: Array = np.ascontiguousarray(initial_cloud(x0_hat, P0, self.N, self.rngs))
         self._logw = np.full((B, self.N), -np.log(self.N))
         self._L = fastpath.f64(model.Q_sqrt)
         self._r = self._L.shape[1]

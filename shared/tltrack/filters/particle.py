@@ -44,6 +44,17 @@ Array = NDArray[np.float64]
 _f64 = fastpath.f64
 
 
+def initial_cloud(x0_hat: Array, P0: Array, N: int, rngs: Sequence[np.random.Generator]) -> Array:
+    """N particles per run drawn from N(x0_hat[:, b], P0), (n_x, B, N); run b from ``rngs[b]``."""
+    n, B = x0_hat.shape
+    if len(rngs) != B:
+        raise ValueError(f"{len(rngs)} random streams for a batch of {B} runs")
+    eps = np.empty((n, B, N))
+    for b, g in enumerate(rngs):
+        eps[:, b, :] = g.standard_normal((n, N))
+    return np.asarray(x0_hat[:, :, None] + np.tensordot(np.linalg.cholesky(P0), eps, axes=1))
+
+
 class ParticleFilter:
     """SIR-PF with systematic resampling at every step; one random stream per run.
 
@@ -64,13 +75,7 @@ class ParticleFilter:
         self.model = model
         self.rngs = list(rngs)
         self.N = n_particles
-        n, B = x0_hat.shape
-        if len(self.rngs) != B:
-            raise ValueError(f"{len(self.rngs)} random streams for a batch of {B} runs")
-        L0 = np.linalg.cholesky(P0)
-        eps = np.empty((n, B, self.N))
-        for b, g in enumerate(self.rngs):
-            eps[:, b, :] = g.standard_normal((n, self.N))
+        B = x0_hat.shape[1]
         L = np.asarray(model.Q_sqrt, dtype=np.float64)
         self._L = _f64(L)
         self._r = L.shape[1]
@@ -82,7 +87,7 @@ class ParticleFilter:
         self._anc = np.empty((B, self.N + 1), dtype=np.int64)  # ancestors (+ a scratch column)
         self._pre: Array | None = None  # the cloud before resampling, while x is not gathered
         self._moments: tuple[Array, Array] | None = None  # of the resampled cloud, from update()
-        self.x = x0_hat[:, :, None] + np.tensordot(L0, eps, axes=1)
+        self.x = initial_cloud(x0_hat, P0, self.N, self.rngs)
 
     @property
     def x(self) -> Array:
