@@ -98,3 +98,6 @@ run turn-bias-ah-fixed4-n24000 --script benchmarks/turn_bias.py --runs 100 --tru
 run divergent-runs-ah-random --script benchmarks/divergent_runs.py \
     "$ROOT/docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json" \
     --particles 6000,24000
+# The two lost TL-RPF runs of the presets study's paper fixed-1 cell, rerun at 4N.
+run divergent-runs-paper-fixed1 --script benchmarks/divergent_runs.py --runs 497,760 \
+    --preset paper --truth fixed --truth-seed 1 --particles 6000,24000
