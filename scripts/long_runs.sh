@@ -101,3 +101,6 @@ run divergent-runs-ah-random --script benchmarks/divergent_runs.py \
 # The two lost TL-RPF runs of the presets study's paper fixed-1 cell, rerun at 4N.
 run divergent-runs-paper-fixed1 --script benchmarks/divergent_runs.py --runs 497,760 \
     --preset paper --truth fixed --truth-seed 1 --particles 6000,24000
+# How one TL-RPF divergence of that cell unfolds (run 6275), at N and at 4N.
+run trace-run-6275 --script benchmarks/trace_run.py --run 6275 --every 5
+run trace-run-6275-n24000 --script benchmarks/trace_run.py --run 6275 --every 5 --particles 24000

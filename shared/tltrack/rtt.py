@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import signal
+import socket
 import tempfile
 import threading
 import time
@@ -41,20 +42,49 @@ def pong() -> None:
         pub.undeclare()
 
 
-def measure(kind: Kind, samples: int = 2000, warmup: int = 200) -> dict[str, float]:
-    """p50 and p99 of ``samples`` round trips (ms), after ``warmup`` unrecorded ones."""
+def _router_argv(listen: str, connect: str | None, zenohd: bool) -> list[str]:
+    """The Python arguments that run a router: ``tltrack router``, or a stock ``zenohd``."""
+    if zenohd:
+        dial = ["-e", connect] if connect else []
+        run = "import os, sys; os.execvp('zenohd', sys.argv[1:])"
+        return ["-c", run, "zenohd", "--no-multicast-scouting", "-l", listen, *dial]
+    dial = ["--connect", connect] if connect else []
+    return ["-m", "tltrack", "router", "--listen", listen, *dial]
+
+
+def _wait_listening(stack: demo.Stack, name: str, endpoint: str, zenohd: bool) -> None:
+    """Our router says when it listens; a zenohd is asked by connecting to its port."""
+    if not zenohd:
+        stack.wait_listening(name)
+        return
+    host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            socket.create_connection((host, int(port)), timeout=1).close()
+            return
+        except OSError:
+            if stack.procs[name].poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{name} (zenohd) is not listening on {endpoint}") from None
+            time.sleep(0.05)
+
+
+def measure(
+    kind: Kind, samples: int = 2000, warmup: int = 200, zenohd: bool = False
+) -> dict[str, float]:
+    """p50 and p99 of ``samples`` round trips (ms), after ``warmup`` unrecorded ones; with
+    ``zenohd``, through stock Rust routers (on PATH, ``make zenohd``) instead of the product's."""
     ports = topology.free_ports(2)
     first, last = (f"tcp/127.0.0.1:{p}" for p in ports)
     with (
         tempfile.TemporaryDirectory() as tmp,
         demo.Stack(first, Path(tmp) / "logs") as stack,
     ):
-        stack.start("router_a", ["-m", "tltrack", "router", "--listen", first])
-        stack.wait_listening("router_a")
+        stack.start("router_a", _router_argv(first, None, zenohd))
+        _wait_listening(stack, "router_a", first, zenohd)
         if kind == "federated":
-            argv = ["-m", "tltrack", "router", "--listen", last, "--connect", first]
-            stack.start("router_b", argv)
-            stack.wait_listening("router_b")
+            stack.start("router_b", _router_argv(last, first, zenohd))
+            _wait_listening(stack, "router_b", last, zenohd)
         there = last if kind == "federated" else first
         code = "from tltrack.rtt import pong; pong()"
         stack.start("pong", ["-c", code], {"TLTRACK_ZENOH_ENDPOINTS": json.dumps([there])})
