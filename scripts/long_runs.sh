@@ -104,3 +104,5 @@ run divergent-runs-paper-fixed1 --script benchmarks/divergent_runs.py --runs 497
 # How one TL-RPF divergence of that cell unfolds (run 6275), at N and at 4N.
 run trace-run-6275 --script benchmarks/trace_run.py --run 6275 --every 5
 run trace-run-6275-n24000 --script benchmarks/trace_run.py --run 6275 --every 5 --particles 24000
+# The product's routers against stock zenohd routers (needs `make zenohd`).
+run router-rtt --script benchmarks/router_rtt.py --rounds 3

@@ -3,6 +3,7 @@ What it measures is a figure, not a test: nothing here is timed."""
 
 from __future__ import annotations
 
+import shutil
 from typing import Any
 
 import pytest
@@ -63,6 +64,16 @@ def test_a_failed_episode_has_no_ratio() -> None:
 def test_the_round_trip_goes_through_real_routers_to_another_process(kind: str) -> None:
     got = rtt.measure(kind, samples=200, warmup=20)
     assert 0 < got["p50"] <= got["p99"] < 2000  # every pong came back, within its 2 s wait
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(
+    shutil.which("zenohd") is None,
+    reason="no zenohd on PATH (make zenohd builds it with cargo, ~7.5 min)",
+)
+def test_the_round_trip_goes_through_stock_zenohd_routers_too() -> None:
+    got = rtt.measure("federated", samples=200, warmup=20, zenohd=True)
+    assert 0 < got["p50"] <= got["p99"] < 2000
 
 
 def test_a_rung_says_why_it_failed() -> None:
