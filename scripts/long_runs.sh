@@ -106,3 +106,10 @@ run trace-run-6275 --script benchmarks/trace_run.py --run 6275 --every 5
 run trace-run-6275-n24000 --script benchmarks/trace_run.py --run 6275 --every 5 --particles 24000
 # The product's routers against stock zenohd routers (needs `make zenohd`).
 run router-rtt --script benchmarks/router_rtt.py --rounds 3
+# Regularisation on a seed nobody looked at (h = 0.5 was chosen on seed 0's worst runs).
+for h in 0 0.5; do
+    run "heldout-seed1-ah-random-h$h" experiment --scenario ct --preset arasaratnam-haykin \
+        --truth random --filters rpf,tl-rpf,robust-tl-rpf,ukf,tl-ukf --particles 6000 \
+        --runs 10000 --primary-intensity 4 --seed 1 --rpf-bandwidth "$h" \
+        --out "$OUT/heldout-seed1/arasaratnam-haykin-random-h$h"
+done
