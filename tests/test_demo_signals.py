@@ -196,3 +196,15 @@ def test_a_service_waiting_for_a_router_that_is_not_there_stops_on_a_signal(
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_a_process_whose_close_hangs_still_ends_soon_after_a_stop_signal() -> None:
+    """The bound behind the 10 s above: a close stuck past the grace period ends the process."""
+    code = (
+        "import time; from tltrack.transport import exit_unless_stopped\n"
+        "exit_unless_stopped(15, 0.5)\n"
+        "time.sleep(30)  # a graceful close that never ends\n"
+    )
+    t0 = time.monotonic()
+    rc = subprocess.run([sys.executable, "-c", code], timeout=20).returncode
+    assert rc == 128 + 15 and time.monotonic() - t0 < 15

@@ -34,6 +34,7 @@ from tltrack.transport import (
     Subscriber,
     ZenohSettings,
     declare_token,
+    exit_unless_stopped,
     open_session,
     query,
 )
@@ -93,6 +94,8 @@ class Service:
 
     def _on_signal(self, signum: int, _frame: FrameType | None) -> None:
         log.info("%s: signal %d, stopping", self.name, signum)
+        if not self.stop.is_set():
+            exit_unless_stopped(signum)
         self.stop.set()
 
     def subscribe(self, *key_exprs: str, liveliness: bool = False) -> Subscriber:

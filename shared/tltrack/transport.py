@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import signal
 import threading
 import time
@@ -554,6 +555,22 @@ class LivelinessWatcher:
 # ---- router -----------------------------------------------------------------------------------
 
 
+#: how long a process may take to close after a stop signal before it exits anyway
+STOP_GRACE_S = 5.0
+
+
+def exit_unless_stopped(signum: int, grace_s: float = STOP_GRACE_S) -> None:
+    """Called on a stop signal: end the process in ``grace_s`` if its graceful close has not.
+
+    A close normally takes well under a second, but a BLOCK put towards a router that is itself
+    going away can wait for seconds, and a process that outlives its stop is an orphan. What is
+    committed is durable (the scorer's rows survive kill -9), so ending it then loses nothing.
+    """
+    timer = threading.Timer(grace_s, os._exit, args=(128 + signum,))
+    timer.daemon = True
+    timer.start()
+
+
 def run_router(
     listen: list[str],
     settings: ZenohSettings | None = None,
@@ -582,6 +599,8 @@ def run_router(
     if threading.current_thread() is threading.main_thread():
 
         def _handler(signum: int, _frame: FrameType | None) -> None:
+            if not stop.is_set():
+                exit_unless_stopped(signum)
             stop.set()
 
         for sig in (signal.SIGINT, signal.SIGTERM):
