@@ -18,7 +18,7 @@ from tltrack.config import Config, make_config
 from tltrack.engine.scenario import simulate
 from tltrack.filters.warm import warm_up
 from tltrack.messages import Measurement, Transfer
-from tltrack.tracking import PrimaryEpisode, SourceEpisode, wire_covariance
+from tltrack.tracking import PrimaryEpisode, SourceEpisode
 
 
 def pause(seconds: float, spin: bool) -> None:
@@ -47,18 +47,7 @@ def tl_steps_ms(cfg: Config, kind: str, pause_s: float, spin: bool = False) -> l
         if k > 1:  # step 1 has no transfer: not a TL step
             out.append((time.perf_counter() - t0) * 1e3)
         primary.step_twin(z["primary"])
-        transfers = {
-            "s1": Transfer(
-                episode="e",
-                sender="s1",
-                k=k,
-                k_apply=k + 1,
-                t_sensor=0.0,
-                sensor=source.sensor_spec,
-                eta=eta.mean[:, 0],
-                P_eta=wire_covariance(eta.cov[0]),
-            )
-        }
+        transfers = {"s1": source.transfer_message(eta, "e", k, 0.0)}
         pause(pause_s, spin)
     return out
 

@@ -19,7 +19,7 @@ from tltrack.engine.scenario import simulate
 from tltrack.filters.base import Estimate
 from tltrack.filters.warm import warm_up
 from tltrack.messages import Measurement, Transfer
-from tltrack.tracking import PrimaryEpisode, SourceEpisode, wire_covariance
+from tltrack.tracking import PrimaryEpisode, SourceEpisode
 
 
 def main() -> None:
@@ -81,18 +81,7 @@ def main() -> None:
                 f" {np.degrees(sd[io]):6.3f} | {np.degrees(x[k, io]):6.2f}/"
                 f"{np.degrees(est.mean[0, io]):6.2f}"
             )
-        transfers = {
-            "s1": Transfer(
-                episode="e",
-                sender="s1",
-                k=k,
-                k_apply=k + 1,
-                t_sensor=0.0,
-                sensor=source.sensor_spec,
-                eta=eta.mean[:, 0],
-                P_eta=wire_covariance(eta.cov[0]),
-            )
-        }
+        transfers = {"s1": source.transfer_message(eta, "e", k, 0.0)}
 
 
 if __name__ == "__main__":

@@ -11,14 +11,13 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
 from tltrack.config import PARTICLE_KINDS, Config, FilterKind
 from tltrack.filters.warm import warm_up
-from tltrack.messages import EpisodeStart, Measurement, Transfer
+from tltrack.messages import EpisodeStart, Measurement
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import (
     SourceEpisode,
     StepQueue,
     StepReport,
     TrackedEpisodes,
-    wire_covariance,
 )
 from tltrack.transport import Received, ZenohSettings, decode_received
 
@@ -101,16 +100,7 @@ class SourceTracker:
         if k < ep.start.K:
             self.svc.publish(
                 keys.transfer(sid, e),
-                lambda: Transfer(
-                    episode=e,
-                    sender=sid,
-                    k=k,
-                    t_sensor=t_sensor,
-                    k_apply=k + 1,
-                    sensor=ep.tracker.sensor_spec,
-                    eta=eta.mean[:, 0],
-                    P_eta=wire_covariance(eta.cov[0]),
-                ),
+                lambda: ep.tracker.transfer_message(eta, e, k, t_sensor),
             )
         StepReport(
             z,

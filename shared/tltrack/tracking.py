@@ -161,6 +161,20 @@ class SourceEpisode:
         """``None``: the measurement of this step never came; predict through it."""
         return self.role.step(None if z is None else self.sensor.observe(z))
 
+    def transfer_message(self, eta: Observation, episode: str, k: int, t_sensor: float) -> Transfer:
+        """What it sends after step ``k``: (eta_hat, P_eta_eta) for step k + 1, described by its
+        own sensor."""
+        return Transfer(
+            episode=episode,
+            sender=self.source_id,
+            k=k,
+            t_sensor=t_sensor,
+            k_apply=k + 1,
+            sensor=self.sensor_spec,
+            eta=eta.mean[:, 0],
+            P_eta=wire_covariance(eta.cov[0]),
+        )
+
     @property
     def recovered(self) -> bool:
         """Did the last step reinitialise the filter (it had lost the track)?"""
