@@ -208,3 +208,16 @@ def test_a_process_whose_close_hangs_still_ends_soon_after_a_stop_signal() -> No
     t0 = time.monotonic()
     rc = subprocess.run([sys.executable, "-c", code], timeout=20).returncode
     assert rc == 128 + 15 and time.monotonic() - t0 < 15
+
+
+def test_a_process_wedged_holding_the_gil_still_ends_soon_after_a_stop_signal() -> None:
+    """The timer is a Python thread; a native call that never releases the GIL (here libc's
+    sleep through ctypes.PyDLL, which keeps it) leaves it to the kernel's alarm."""
+    code = (
+        "import ctypes; from tltrack.transport import exit_unless_stopped\n"
+        "exit_unless_stopped(15, 0.5)\n"
+        "ctypes.PyDLL(None).sleep(30)  # wedged, the GIL held\n"
+    )
+    t0 = time.monotonic()
+    rc = subprocess.run([sys.executable, "-c", code], timeout=20).returncode
+    assert rc == -signal.SIGALRM and time.monotonic() - t0 < 15

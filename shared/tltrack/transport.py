@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import math
 import os
 import signal
 import threading
@@ -565,10 +566,15 @@ def exit_unless_stopped(signum: int, grace_s: float = STOP_GRACE_S) -> None:
     A close normally takes well under a second, but a BLOCK put towards a router that is itself
     going away can wait for seconds, and a process that outlives its stop is an orphan. What is
     committed is durable (the scorer's rows survive kill -9), so ending it then loses nothing.
+
+    The timer is a Python thread, so it cannot run while a native call holds the GIL; a second
+    later the kernel ends the process anyway (``alarm``: SIGALRM's default action), whatever the
+    interpreter is doing.
     """
     timer = threading.Timer(grace_s, os._exit, args=(128 + signum,))
     timer.daemon = True
     timer.start()
+    signal.alarm(math.ceil(grace_s) + 1)
 
 
 def run_router(
