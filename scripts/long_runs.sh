@@ -113,3 +113,14 @@ for h in 0 0.5; do
         --runs 10000 --primary-intensity 4 --seed 1 --rpf-bandwidth "$h" \
         --out "$OUT/heldout-seed1/arasaratnam-haykin-random-h$h"
 done
+# Two more proposals for rpf (benchmarks/proposals.py), on the 13 divergent runs at N = 6000,
+# and the defensive one over the held-out seed's 10,000 runs.
+for p in defensive linearised; do
+    run "proposals-$p-ah-random" --script benchmarks/proposals.py "$p" \
+        "$ROOT/docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json" \
+        --particles 6000 --compare ""
+done
+run proposals-defensive-seed1 --script benchmarks/proposals.py defensive tltrack experiment \
+    --scenario ct --preset arasaratnam-haykin --truth random --filters rpf,tl-rpf,robust-tl-rpf \
+    --particles 6000 --runs 10000 --primary-intensity 4 --seed 1 \
+    --out "$OUT/proposals/defensive-ah-random-seed1"
