@@ -4,107 +4,161 @@ RMSE follows the paper: RMSE(k) = sqrt(mean over episodes of the squared positio
 overall = mean over k. Latency is end to end: sensor timestamp to the estimate's arrival here
 (meaningful on one host; across hosts it needs synchronised clocks). ``stages_ms`` splits it into
 the p50 of each stage of :mod:`tltrack.latency`.
+
+Each episode is scored on its own, from its rows alone (read through the tables' primary keys), and
+a :class:`Summarizer` keeps the scores of the episodes the scorer has finished with: a summary then
+reads only the episodes under way, however many the store holds (``benchmarks/scorer_summary.py``
+times both ways).
 """
 
 from __future__ import annotations
 
 import json
 from collections import defaultdict
+from collections.abc import Container
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from tltrack import latency
 from tltrack.services.scorer.store import Store
 
 
-def _percentiles(ms: list[float]) -> dict[str, float | None]:
-    if not ms:
+def _percentiles(ms: NDArray[np.float64]) -> dict[str, float | None]:
+    if len(ms) == 0:
         return {"p50": None, "p95": None, "p99": None}
     p = np.percentile(ms, [50, 95, 99])
     return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}
 
 
-def summarize(store: Store, episodes: list[str] | None = None) -> dict[str, Any]:
-    """The summary over ``episodes`` (default: all in the store)."""
-    eps = store.rows("SELECT episode, run, K, ended, end_reason FROM episodes ORDER BY started")
-    if episodes is not None:
-        eps = [e for e in eps if e[0] in episodes]
-    names = [e[0] for e in eps]
-    K_of = {e[0]: e[2] for e in eps}
+def _rmse(k: NDArray[np.int64], sq: NDArray[np.float64]) -> dict[str, Any]:
+    """RMSE(k) = sqrt(mean over episodes of the squared error at k), and its mean over k."""
+    if len(k) == 0:
+        return {"rmse_overall": None, "rmse_per_step": []}
+    _steps, at = np.unique(k, return_inverse=True)
+    per_step = np.sqrt(np.bincount(at, weights=sq) / np.bincount(at))
+    return {"rmse_overall": float(np.mean(per_step)), "rmse_per_step": per_step.tolist()}
+
+
+@dataclass(frozen=True)
+class _Scores:
+    """One filter's record in one episode, as arrays, so that a summary over many episodes
+    concatenates them instead of looping over rows."""
+
+    k: NDArray[np.int64]  #: the steps with both an estimate and the truth
+    sq: NDArray[np.float64]  #: their squared position errors
+    steps: int
+    used: int
+    recoveries: int
+    end_to_end: NDArray[np.float64]  #: ms, one per step
+    split: NDArray[np.float64]  #: (n, 5) :func:`tltrack.latency.stages`, ms
+
+
+def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
+    """Every filter's scores in ``episode``, from its rows alone."""
     truth = {
-        (ep, k): np.array(json.loads(pos))
-        for ep, k, pos in store.rows("SELECT episode, k, pos FROM truth WHERE pos IS NOT NULL")
+        k: np.array(json.loads(pos))
+        for k, pos in store.rows(
+            "SELECT k, pos FROM truth WHERE episode = ? AND pos IS NOT NULL", episode
+        )
     }
-    sq: dict[str, dict[int, list[float]]] = defaultdict(lambda: defaultdict(list))
-    end_to_end: dict[str, list[float]] = defaultdict(list)
-    split: dict[str, list[tuple[float, ...]]] = defaultdict(list)
-    used: dict[str, int] = defaultdict(int)
-    recoveries: dict[str, int] = defaultdict(int)
-    seen: dict[str, set[tuple[str, int]]] = defaultdict(set)
-    for (
-        ep,
-        name,
-        k,
-        pos,
-        tu,
-        rec,
-        t_sensor,
-        t_recv,
-        t_sent,
-        step_ms,
-        t_received,
-        t_step,
-    ) in store.rows(
-        "SELECT episode, filter, k, pos, transfer_used, recovered, t_sensor, t_recv, t_sent,"
-        " step_ms, t_received, t_step FROM estimates"
+    rows: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
+    for row in store.rows(
+        "SELECT filter, k, pos, transfer_used, recovered, t_sensor, t_recv, t_sent, step_ms,"
+        " t_received, t_step FROM estimates WHERE episode = ?",
+        episode,
     ):
-        if ep not in K_of:
-            continue
-        seen[name].add((ep, k))
-        end_to_end[name].append((t_recv - t_sensor) * 1e3)
-        if t_received is not None and t_step is not None:
-            split[name].append(
-                latency.stages(t_sensor, t_received, t_step, step_ms, t_sent, t_recv)
-            )
-        used[name] += tu
-        recoveries[name] += rec or 0
-        if (ep, k) in truth and pos is not None:
-            d = np.array(json.loads(pos)) - truth[ep, k]
-            sq[name][k].append(float(d[0] ** 2 + d[1] ** 2))
-    filters = {}
-    for name in sorted(seen):
-        steps = sorted(sq[name])
-        per_step = [float(np.sqrt(np.mean(sq[name][k]))) for k in steps]
-        expected = sum(K_of[e] for e in names)
-        filters[name] = {
-            "rmse_overall": float(np.mean(per_step)) if per_step else None,
-            "rmse_per_step": per_step,
-            "steps": len(seen[name]),
-            "gaps": expected - len(seen[name]),
-            "steps_with_transfer": used[name],
-            "recoveries": recoveries[name],
-            "latency_ms": _percentiles(end_to_end[name]),
-            "stages_ms": latency.p50(split[name]),
+        rows[row[0]].append(row[1:])
+    scores = {}
+    for name, mine in rows.items():  # (episode, filter, k) is the key: one row per step
+        k, sq, split = [], [], []
+        for step, pos, _tu, _rec, t_sensor, t_recv, t_sent, step_ms, t_received, t_step in mine:
+            if step in truth and pos is not None:
+                d = np.array(json.loads(pos)) - truth[step]
+                k.append(step)
+                sq.append(float(d[0] ** 2 + d[1] ** 2))
+            if t_received is not None and t_step is not None:
+                split.append(latency.stages(t_sensor, t_received, t_step, step_ms, t_sent, t_recv))
+        scores[name] = _Scores(
+            k=np.array(k, dtype=np.int64),
+            sq=np.array(sq),
+            steps=len(mine),
+            used=sum(r[2] for r in mine),
+            recoveries=sum(r[3] or 0 for r in mine),
+            end_to_end=np.array([(r[5] - r[4]) * 1e3 for r in mine]),
+            split=np.array(split).reshape(-1, len(latency.STAGES)),
+        )
+    return scores
+
+
+class Summarizer:
+    """Summaries of a growing store. The scores of an episode named ``final`` are kept after it
+    is read; a row that still arrives for it must be followed by :meth:`forget`."""
+
+    def __init__(self, store: Store) -> None:
+        self.store = store
+        self._kept: dict[str, dict[str, _Scores]] = {}
+
+    def forget(self, episode: str) -> None:
+        self._kept.pop(episode, None)
+
+    def summary(
+        self, episodes: list[str] | None = None, final: Container[str] = ()
+    ) -> dict[str, Any]:
+        """The summary over ``episodes`` (default: all in the store)."""
+        eps = self.store.rows(
+            "SELECT episode, run, K, ended, end_reason FROM episodes ORDER BY started"
+        )
+        if episodes is not None:
+            eps = [e for e in eps if e[0] in episodes]
+        per_episode = []
+        for ep, *_ in eps:
+            scores = self._kept.get(ep)
+            if scores is None:
+                scores = episode_scores(self.store, ep)
+                if ep in final:
+                    self._kept[ep] = scores
+            per_episode.append(scores)
+        expected = sum(e[2] for e in eps)
+        filters = {}
+        for name in sorted({n for scores in per_episode for n in scores}):
+            mine = [scores[name] for scores in per_episode if name in scores]
+            steps = sum(s.steps for s in mine)
+            filters[name] = {
+                **_rmse(np.concatenate([s.k for s in mine]), np.concatenate([s.sq for s in mine])),
+                "steps": steps,
+                "gaps": expected - steps,
+                "steps_with_transfer": sum(s.used for s in mine),
+                "recoveries": sum(s.recoveries for s in mine),
+                "latency_ms": _percentiles(np.concatenate([s.end_to_end for s in mine])),
+                "stages_ms": latency.p50(np.concatenate([s.split for s in mine])),
+            }
+        every = [s for scores in per_episode for s in scores.values()]
+        everything = np.concatenate([s.end_to_end for s in every]) if every else np.empty(0)
+        split = (
+            np.concatenate([s.split for s in every])
+            if every
+            else np.empty((0, len(latency.STAGES)))
+        )
+        rejected: dict[str, dict[str, int]] = {}
+        dropped = 0
+        for operator, service, _t, stats in self.store.rows("SELECT * FROM service_stats"):
+            st = json.loads(stats)
+            rejected[f"{operator}/{service}"] = st.get("rejected", {}).get("by_reason", {})
+            dropped += int(st.get("dropped", 0))
+        return {
+            "episodes": [
+                {"episode": e, "run": r, "K": K, "complete": reason == "complete"}
+                for e, r, K, _ended, reason in eps
+            ],
+            "filters": filters,
+            "latency_ms": _percentiles(everything),
+            "stages_ms": latency.p50(split),
+            "messages": {
+                "rejected": rejected,
+                "rejected_total": sum(sum(v.values()) for v in rejected.values()),
+                "dropped": dropped,
+                "missing_estimates": sum(f["gaps"] for f in filters.values()),
+            },
         }
-    everything = [v for lst in end_to_end.values() for v in lst]
-    rejected: dict[str, dict[str, int]] = {}
-    dropped = 0
-    for operator, service, _t, stats in store.rows("SELECT * FROM service_stats"):
-        s = json.loads(stats)
-        rejected[f"{operator}/{service}"] = s.get("rejected", {}).get("by_reason", {})
-        dropped += int(s.get("dropped", 0))
-    return {
-        "episodes": [
-            {"episode": e, "run": r, "K": K, "complete": reason == "complete"}
-            for e, r, K, _ended, reason in eps
-        ],
-        "filters": filters,
-        "latency_ms": _percentiles(everything),
-        "stages_ms": latency.p50([v for rows in split.values() for v in rows]),
-        "messages": {
-            "rejected": rejected,
-            "rejected_total": sum(sum(v.values()) for v in rejected.values()),
-            "dropped": dropped,
-            "missing_estimates": sum(f["gaps"] for f in filters.values()),
-        },
-    }

@@ -23,6 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from tltrack.messages import EstimateMsg
 
@@ -46,8 +47,8 @@ def of(m: EstimateMsg, t_recv: float) -> tuple[float, float, float, float, float
     return stages(m.t_sensor, m.t_received, m.t_step, m.step_ms, m.t_sent, t_recv)
 
 
-def p50(rows: Sequence[tuple[float, ...]]) -> dict[str, float | None]:
-    """Each stage's median over ``rows`` of :func:`stages`."""
-    if not rows:
+def p50(rows: Sequence[tuple[float, ...]] | NDArray[np.float64]) -> dict[str, float | None]:
+    """Each stage's median over ``rows`` of :func:`stages` (or an array of them, one per row)."""
+    if len(rows) == 0:
         return {s: None for s in STAGES}
     return dict(zip(STAGES, (float(v) for v in np.median(np.array(rows), axis=0)), strict=True))
