@@ -198,26 +198,21 @@ def test_a_service_waiting_for_a_router_that_is_not_there_stops_on_a_signal(
             proc.wait()
 
 
-def test_a_process_whose_close_hangs_still_ends_soon_after_a_stop_signal() -> None:
+@pytest.mark.parametrize(
+    ("close", "rc"),
+    [
+        ("import time; time.sleep(30)", 128 + signal.SIGTERM),  # the timer ends it
+        # libc's sleep through ctypes.PyDLL keeps the GIL, so the timer (a Python thread)
+        # cannot run: the kernel's alarm ends it
+        ("import ctypes; ctypes.PyDLL(None).sleep(30)", -signal.SIGALRM),
+    ],
+    ids=["close-hangs", "wedged-holding-the-gil"],
+)
+def test_a_process_whose_close_never_ends_still_ends_soon_after_a_stop_signal(
+    close: str, rc: int
+) -> None:
     """The bound behind the 10 s above: a close stuck past the grace period ends the process."""
-    code = (
-        "import time; from tltrack.transport import exit_unless_stopped\n"
-        "exit_unless_stopped(15, 0.5)\n"
-        "time.sleep(30)  # a graceful close that never ends\n"
-    )
+    code = f"from tltrack.transport import exit_unless_stopped as x\nx(15, 0.5)\n{close}"
     t0 = time.monotonic()
-    rc = subprocess.run([sys.executable, "-c", code], timeout=20).returncode
-    assert rc == 128 + 15 and time.monotonic() - t0 < 15
-
-
-def test_a_process_wedged_holding_the_gil_still_ends_soon_after_a_stop_signal() -> None:
-    """The timer is a Python thread; a native call that never releases the GIL (here libc's
-    sleep through ctypes.PyDLL, which keeps it) leaves it to the kernel's alarm."""
-    code = (
-        "import ctypes; from tltrack.transport import exit_unless_stopped\n"
-        "exit_unless_stopped(15, 0.5)\n"
-        "ctypes.PyDLL(None).sleep(30)  # wedged, the GIL held\n"
-    )
-    t0 = time.monotonic()
-    rc = subprocess.run([sys.executable, "-c", code], timeout=20).returncode
-    assert rc == -signal.SIGALRM and time.monotonic() - t0 < 15
+    assert subprocess.run([sys.executable, "-c", code], timeout=20).returncode == rc
+    assert time.monotonic() - t0 < 15
