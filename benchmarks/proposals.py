@@ -27,6 +27,7 @@ Usage: the variant, then the arguments of ``divergent_runs.py``, or ``tltrack`` 
 from __future__ import annotations
 
 import sys
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 import divergent_runs
@@ -47,7 +48,7 @@ M, C = 10, 3.0
 EPS = 1e-3
 
 
-class _Proposal(AuxiliaryParticleFilter):
+class _Proposal(AuxiliaryParticleFilter, ABC):
     """The auxiliary filter with the second stage's draw replaced: :meth:`_draw` returns the
     ancestors (B, N + 1), the look-ahead they were chosen by, the particles, and each
     particle's log p(x | x_anc) / q(x | x_anc) (the prior over the proposal)."""
@@ -55,20 +56,10 @@ class _Proposal(AuxiliaryParticleFilter):
     def update(self, observations: Sequence[Observation]) -> None:
         if not self._pending or self._reset:
             raise RuntimeError("a proposal benchmark runs without recovery")
-        B, N = self._logw.shape
         anc, la, beta, x, log_pq = self._draw(observations)
-        ll = np.empty((B, N))
+        ll = np.empty(self._logw.shape)
         self._likelihood.into(x, observations, ll)
-        ll += log_pq
-        ok = self._first_stage_ok
-        mean, cov = np.empty((B, x.shape[0])), np.empty((B, x.shape[0], x.shape[0]))
-        auxiliary.second_stage(ll, la, anc, beta, x, self._logw, mean, cov, ok, np.empty(N))
-        if not ok.all():
-            x[:, ~ok, :] = np.nan
-            self._logw[~ok] = -np.log(N)
-            mean[~ok], cov[~ok] = np.nan, np.nan
-        self._x, self._moments = x, (mean, cov)
-        self._pending, self._preview, self._means = False, None, None
+        self._second_stage(x, ll + log_pq, la, anc, beta, self._first_stage_ok)
 
     def _ancestors(self, la: Array, beta: float) -> NDArray[np.int64]:
         B, N = self._logw.shape
@@ -78,10 +69,11 @@ class _Proposal(AuxiliaryParticleFilter):
         self._first_stage_ok = ok  # a run whose weights are not finite is lost: left NaN
         return np.where(ok[:, None], self._anc, self._identity)
 
+    @abstractmethod
     def _draw(
         self, observations: Sequence[Observation]
     ) -> tuple[NDArray[np.int64], Array, float, Array, Array]:
-        raise NotImplementedError
+        """The ancestors, their look-ahead and its exponent, the particles, log p/q."""
 
 
 class Defensive(_Proposal):

@@ -122,8 +122,12 @@ class Summarizer:
             per_episode.append(scores)
         expected = sum(e[2] for e in eps)
         filters = {}
+        end_to_end = [np.empty(0)]  # every filter's, for the overall latency
+        split = [np.empty((0, len(latency.STAGES)))]
         for name in sorted({n for scores in per_episode for n in scores}):
             mine = [scores[name] for scores in per_episode if name in scores]
+            end_to_end.append(np.concatenate([s.end_to_end for s in mine]))
+            split.append(np.concatenate([s.split for s in mine]))
             steps = sum(s.steps for s in mine)
             filters[name] = {
                 **_rmse(np.concatenate([s.k for s in mine]), np.concatenate([s.sq for s in mine])),
@@ -131,16 +135,9 @@ class Summarizer:
                 "gaps": expected - steps,
                 "steps_with_transfer": sum(s.used for s in mine),
                 "recoveries": sum(s.recoveries for s in mine),
-                "latency_ms": _percentiles(np.concatenate([s.end_to_end for s in mine])),
-                "stages_ms": latency.p50(np.concatenate([s.split for s in mine])),
+                "latency_ms": _percentiles(end_to_end[-1]),
+                "stages_ms": latency.p50(split[-1]),
             }
-        every = [s for scores in per_episode for s in scores.values()]
-        everything = np.concatenate([s.end_to_end for s in every]) if every else np.empty(0)
-        split = (
-            np.concatenate([s.split for s in every])
-            if every
-            else np.empty((0, len(latency.STAGES)))
-        )
         rejected: dict[str, dict[str, int]] = {}
         dropped = 0
         for operator, service, _t, stats in self.store.rows("SELECT * FROM service_stats"):
@@ -153,8 +150,8 @@ class Summarizer:
                 for e, r, K, _ended, reason in eps
             ],
             "filters": filters,
-            "latency_ms": _percentiles(everything),
-            "stages_ms": latency.p50(split),
+            "latency_ms": _percentiles(np.concatenate(end_to_end)),
+            "stages_ms": latency.p50(np.concatenate(split)),
             "messages": {
                 "rejected": rejected,
                 "rejected_total": sum(sum(v.values()) for v in rejected.values()),

@@ -150,8 +150,22 @@ class AuxiliaryParticleFilter:
         self._apply_reset(x)
         ll = np.empty((B, N))
         self._likelihood.into(x, observations, ll)
+        self._second_stage(x, ll, la, anc, self.beta, ok)
+
+    def _second_stage(
+        self,
+        x: Array,
+        ll: Array,
+        la: Array,
+        anc: NDArray[np.int64],
+        beta: float,
+        ok: NDArray[np.bool_],
+    ) -> None:
+        """The propagated cloud ``x``, weighed by ``ll`` over ``beta`` ``la`` of its ancestors,
+        becomes the posterior; a run not ``ok``, or whose weights are not finite, reads as lost."""
+        B, N = ll.shape
         mean, cov = np.empty((B, x.shape[0])), np.empty((B, x.shape[0], x.shape[0]))
-        auxiliary.second_stage(ll, la, anc, self.beta, x, self._logw, mean, cov, ok, np.empty(N))
+        auxiliary.second_stage(ll, la, anc, beta, x, self._logw, mean, cov, ok, np.empty(N))
         if not ok.all():  # weights not finite (NaN particles): the run reads as lost
             x[:, ~ok, :] = np.nan
             self._logw[~ok] = -np.log(N)
