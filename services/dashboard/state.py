@@ -20,8 +20,8 @@ from typing import Any, Literal
 
 import numpy as np
 from tltrack import latency
+from tltrack.engine.setup import PRIMARY, sensor_spec
 from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
-from tltrack.models.from_config import PRIMARY, sensor_spec
 
 Role = Literal["source", "tl", "isolated"]
 Verdict = Literal["new", "duplicate", "capacity"]

@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
-from tltrack.config import PARTICLE_KINDS, Config, FilterKind
+from tltrack.config import Config, FilterKindName
 from tltrack.filters.decision import NotComparableError
+from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement, Transfer
 from tltrack.service import Service, load_settings, setup_logging
@@ -39,7 +40,7 @@ class Settings(BaseSettings):
         env_prefix="TLTRACK_PRIMARY_", cli_prog_name=NAME, env_ignore_empty=True
     )
 
-    filter: FilterKind = Field("rpf", description="filter kind")
+    filter: FilterKindName = Field("rpf", description="filter kind")
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
@@ -244,7 +245,7 @@ def _sooner(a: float | None, b: float) -> float:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    if settings.filter in PARTICLE_KINDS:
+    if FILTERS.get(settings.filter).particle:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)

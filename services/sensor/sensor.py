@@ -21,8 +21,8 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys, replay
 from tltrack.config import Config
 from tltrack.engine.scenario import measurements, truth
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.messages import EpisodeStart, Measurement, Tick
-from tltrack.models.from_config import PRIMARY, sensor
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.tracking import Episodes
 from tltrack.transport import Received, ZenohSettings, decode_received
@@ -104,11 +104,12 @@ class Sensor:
         if sid != PRIMARY and sid not in {src.id for src in cfg.sources}:
             log.info("episode %s has no sensor %s; ignored", start.episode, sid)
             return None
+        setup = Setup(cfg)
         if self.s.replay_csv is None:
-            z = measurements(cfg, start.run, truth(cfg, start.run), sid)
+            z = measurements(setup, start.run, truth(setup, start.run), sid)
         else:
             try:
-                z = replay.load(self.s.replay_csv, {sid: sensor(cfg, sid)})[sid]
+                z = replay.load(self.s.replay_csv, {sid: setup.sensor(sid)})[sid]
             except replay.ReplayError as err:
                 log.error("episode %s: nothing to replay: %s", start.episode, err)
                 self.svc.count("replay_refused")

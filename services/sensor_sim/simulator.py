@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,9 +23,9 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys, replay
 from tltrack.config import Config
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.truth_file import experiment_config
 from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
-from tltrack.models.from_config import PRIMARY, motion_model, sensor
 from tltrack.service import Service, load_settings, setup_logging
 from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
 
@@ -40,15 +40,16 @@ class Settings(BaseSettings):
         env_prefix="TLTRACK_SIM_", cli_prog_name=NAME, env_ignore_empty=True
     )
 
+    # The experiment's fields, passed to the config, which validates them (tltrack.config)
     config: Path | None = Field(None, description="TOML/JSON experiment config")
-    scenario: Literal["cv", "ct"] | None = None
-    preset: Literal["paper", "arasaratnam-haykin"] | None = None
-    truth: Literal["fixed", "random", "noise-free"] | None = None
+    scenario: str | None = Field(None, description="the config's scenario")
+    preset: str | None = Field(None, description="the config's preset")
+    truth: str | None = Field(None, description="the config's truth mode")
     truth_file: Path | None = Field(None, description="a recorded track (CSV) as the truth")
-    seed: int | None = Field(None, ge=0)
-    steps: int | None = Field(None, ge=1, description="K, steps per episode")
-    particles: int | None = Field(None, ge=10)
-    primary_intensity: float | None = Field(None, gt=0)
+    seed: int | None = Field(None, description="the config's seed")
+    steps: int | None = Field(None, description="the config's K, steps per episode")
+    particles: int | None = Field(None, description="the config's particles")
+    primary_intensity: float | None = Field(None, description="the config's primary_intensity")
     episodes: int = Field(1, ge=1)
     first_run: int = Field(0, ge=0, description="run index of the first episode")
     episode_prefix: str = Field("ep", pattern=r"^[A-Za-z0-9_-]{1,40}$")
@@ -91,14 +92,15 @@ class Settings(BaseSettings):
 class Simulator:
     def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
         self.s, self.cfg, self.svc = settings, cfg, svc
-        self.layout = motion_model(cfg).layout
+        setup = Setup(cfg)
+        self.layout = setup.layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
         if settings.replay_csv and not settings.measurements:
             raise replay.ReplayError(
                 "with --measurements false each operator's sensor replays its own rows "
                 "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
             )
-        models = {sid: sensor(cfg, sid) for sid in self.sensors}
+        models = {sid: setup.sensor(sid) for sid in self.sensors}
         self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
         if self.recorded is not None:
             self.cfg = cfg.with_(K=len(self.recorded[PRIMARY]))
@@ -127,7 +129,7 @@ class Simulator:
         run = self.s.first_run + i
         e = f"{self.s.episode_prefix}-r{run}"
         if self.recorded is None:
-            sim = simulate(self.cfg, run)
+            sim = simulate(Setup(self.cfg), run)
             z: dict[str, NDArray[np.float64]] = sim.z
             truth: NDArray[np.float64] | None = sim.truth
         else:

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack import keys
-from tltrack.config import PARTICLE_KINDS, Config, FilterKind
+from tltrack.config import Config, FilterKindName
+from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.messages import EpisodeStart, Measurement
 from tltrack.service import Service, load_settings, setup_logging
@@ -33,7 +34,7 @@ class Settings(BaseSettings):
     )
 
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
-    filter: FilterKind = Field("rpf", description="filter kind")
+    filter: FilterKindName = Field("rpf", description="filter kind")
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
     gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
@@ -119,7 +120,7 @@ class SourceTracker:
 def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
-    if settings.filter in PARTICLE_KINDS:
+    if FILTERS.get(settings.filter).particle:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
         inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))

@@ -34,20 +34,20 @@ import gc
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config, make_config
+from tltrack.engine.driver import Primaries, Sources
+from tltrack.engine.registry import parse
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
-from tltrack.filters.auxiliary import AuxiliaryParticleFilter
-from tltrack.filters.particle import ParticleFilter
-from tltrack.filters.transfer import Primary, Source
 from tltrack.models.angles import wrap_angle
 from tltrack.models.base import MotionModel
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
+from tltrack.models.kinds import SENSORS
 from tltrack.models.observation import Observation
 from tltrack.models.range_bearing import RangeBearing
 
@@ -74,6 +74,12 @@ Transfers = dict[str, Observation]
 @dataclass(frozen=True)
 class UserRangeBearing(RangeBearing):
     """The paper's sensor under a type the fast path does not list: a user's own model."""
+
+    kind: ClassVar[str] = "user-range-bearing"
+
+
+#: the user's sensor kind, registered as any plugin's would be
+USER_KIND = SENSORS.register(UserRangeBearing).kind
 
 
 class NumpyBaseline:
@@ -109,7 +115,7 @@ class NumpyBaseline:
 
 
 def _stonesoup_stepper(
-    cfg: Config, z: Array, x0_hat: Array, N: int, seed: int
+    setup: Setup, z: Array, x0_hat: Array, N: int, seed: int
 ) -> Callable[[int], Any] | None:
     """One Stone Soup PF step per call ``step(k)`` on the primary's z_k; None without Stone Soup."""
     try:
@@ -127,8 +133,8 @@ def _stonesoup_stepper(
     import datetime
 
     np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
-    s = sensor(cfg, PRIMARY)
-    R = s.R(intensity(cfg, PRIMARY))
+    cfg = setup.cfg
+    s, R = setup.sensor(PRIMARY), setup.sensors[PRIMARY].R
     meas = CartesianToBearingRange(
         ndim_state=5,
         mapping=(0, 2),
@@ -162,33 +168,35 @@ def _one_pass(
 ) -> bool:
     """Run every filter over ``steps`` steps of one run, appending each step's seconds to ``times``.
 
-    Returns whether Stone Soup took part.
+    Every filter steps through the step driver's halves, one filter per call. Returns whether
+    Stone Soup took part.
     """
-    model = motion_model(cfg)
-    sim = simulate(cfg, 0)
+    setup = Setup(cfg.with_(seed=seed))
+    sim = simulate(setup, 0)
     sid = cfg.sources[0].id
-    s_p, s_s = sensor(cfg, PRIMARY), sensor(cfg, sid)
-    rb = [s for s in (s_p, s_s) if isinstance(s, RangeBearing)]
-    if len(rb) != 2:
+    s_p, s_s = setup.sensor(PRIMARY), setup.sensor(sid)
+    if not all(isinstance(s, RangeBearing) for s in (s_p, s_s)):
         raise ValueError("the bench compares range-bearing filters: both sensors must be one")
-    R_p, R_s = s_p.R(intensity(cfg, PRIMARY)), s_s.R(intensity(cfg, sid))
+    R_p = setup.sensors[PRIMARY].R
     x0 = sim.x0_hat[:, None]
-    P0 = np.diag(cfg.P0_diag)
-
-    def pf(purpose: str) -> ParticleFilter:
-        return ParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
-
-    def rpf(purpose: str) -> AuxiliaryParticleFilter:
-        return AuxiliaryParticleFilter(model, x0, P0, cfg.particles, [stream(seed, 0, purpose)])
-
-    source = Source(pf("source-pf"), s_s, R_s)
-    tl, iso, user = Primary(pf("tl-pf")), Primary(pf("pf")), Primary(pf("user-model"))
-    r_source = Source(rpf("source-rpf"), s_s, R_s)
-    r_tl, r_iso = Primary(rpf("tl-rpf")), Primary(rpf("rpf"))
-    u_p, u_s = (UserRangeBearing(s.sigma_r, s.sigma_bearing, s.layout, s.position) for s in rb)
-    base = NumpyBaseline(model, sim.x0_hat, P0, cfg.particles, stream(seed, 0, "numpy-baseline"))
+    sources = Sources(setup, [("source-pf", sid), ("source-rpf", sid)], x0, [0])
+    primaries = Primaries(setup, [parse(n) for n in ("tl-pf", "pf", "tl-rpf", "rpf")], x0, [0])
+    # the user's: the same sensors under a kind the fast path does not list
+    mine = Setup(
+        setup.cfg.with_(
+            primary_sensor={**setup.sensors[PRIMARY].spec.model_dump(), "kind": USER_KIND},
+            sources=[
+                {"id": sid, "sensor": {**setup.sensors[sid].spec.model_dump(), "kind": USER_KIND}}
+            ],
+        )
+    )
+    user = Primaries(mine, [parse("tl-pf")], x0, [0])
+    u_p, u_s = mine.sensor(PRIMARY), mine.sensor(sid)
+    base = NumpyBaseline(
+        setup.motion, sim.x0_hat, setup.P0, cfg.particles, stream(seed, 0, "numpy-baseline")
+    )
     ss = (
-        _stonesoup_stepper(cfg, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed)
+        _stonesoup_stepper(setup, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed)
         if (with_stonesoup)
         else None
     )
@@ -199,23 +207,28 @@ def _one_pass(
             stmts.append((t.mean[:, 0], t.cov[0], s_s.position))
         base.step(stmts)
 
-    def user_step(z_p: Observation, t: Observation | None) -> None:
-        mine = replace(z_p, sensor=u_p)
-        user.step(mine, [] if t is None else [replace(t, sensor=u_s)])
+    def source_step(name: str, k: int, z_s: Observation) -> Observation:
+        return sources.step(k, {sid: z_s}, only=[(name, sid)])[name, sid]
 
-    def tl_step(primary: Primary, z_p: Observation, t: Observation | None) -> None:
-        primary.step(z_p, [] if t is None else [t])
+    def tl_step(
+        half: Primaries, name: str, k: int, z_p: Observation, t: Observation | None
+    ) -> None:
+        half.step(k, z_p, lambda spec: [t] if t is not None and spec.role == "tl" else [], [name])
+
+    def user_step(k: int, z_p: Observation, t: Observation | None) -> None:
+        mine_t = None if t is None else replace(t, sensor=u_s)
+        tl_step(user, "tl-pf", k, replace(z_p, sensor=u_p), mine_t)
 
     #: name -> one step, given (k, z_p, z_s, the transfers for k by source); a source returns
     #: its next transfer
     steppers: dict[str, Callable[[int, Observation, Observation, Transfers], Any]] = {
-        "source-pf": lambda k, z_p, z_s, t: source.step(z_s)[1],
-        "tl-pf": lambda k, z_p, z_s, t: tl_step(tl, z_p, t.get("source-pf")),
-        "pf": lambda k, z_p, z_s, t: iso.step(z_p),
-        "source-rpf": lambda k, z_p, z_s, t: r_source.step(z_s)[1],
-        "tl-rpf": lambda k, z_p, z_s, t: tl_step(r_tl, z_p, t.get("source-rpf")),
-        "rpf": lambda k, z_p, z_s, t: r_iso.step(z_p),
-        "user-model": lambda k, z_p, z_s, t: user_step(z_p, t.get("source-pf")),
+        "source-pf": lambda k, z_p, z_s, t: source_step("source-pf", k, z_s),
+        "tl-pf": lambda k, z_p, z_s, t: tl_step(primaries, "tl-pf", k, z_p, t.get("source-pf")),
+        "pf": lambda k, z_p, z_s, t: tl_step(primaries, "pf", k, z_p, None),
+        "source-rpf": lambda k, z_p, z_s, t: source_step("source-rpf", k, z_s),
+        "tl-rpf": lambda k, z_p, z_s, t: tl_step(primaries, "tl-rpf", k, z_p, t.get("source-rpf")),
+        "rpf": lambda k, z_p, z_s, t: tl_step(primaries, "rpf", k, z_p, None),
+        "user-model": lambda k, z_p, z_s, t: user_step(k, z_p, t.get("source-pf")),
         "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, z_p, t.get("source-pf")),
     }
     if ss is not None:
@@ -226,8 +239,8 @@ def _one_pass(
     clock = time.perf_counter
     order = np.random.default_rng(seed)
     for k in range(1, steps + 1):
-        z_p = Observation.broadcast(s_p, sim.z[PRIMARY][k - 1], R_p)
-        z_s = Observation.broadcast(s_s, sim.z[sid][k - 1], R_s)
+        z_p = setup.sensors[PRIMARY].observe(sim.z[PRIMARY][k - 1])
+        z_s = setup.sensors[sid].observe(sim.z[sid][k - 1])
         upcoming: Transfers = {}
         # a fresh order every step: no filter always runs right after the same one (whose memory
         # traffic it would inherit). The transfer for k + 1 waits until k + 1: any order works.

@@ -18,61 +18,29 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, ValidationError, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    FiniteFloat,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
-Scenario = Literal["cv", "ct", "ca"]
+from tltrack.declare import Parameter, UnknownKindError
+from tltrack.filters.kinds import FILTERS
+from tltrack.models.kinds import MOTIONS, SENSORS
+
 Preset = Literal["paper", "arasaratnam-haykin"]
 TruthMode = Literal["fixed", "random", "noise-free", "file"]
 SourceFault = Literal["none", "bias", "diverged", "stale"]
-#: the posterior approximations a filter may use (tltrack.engine.registry builds them)
-FilterKind = Literal["pf", "rpf", "ukf", "ckf3", "ckf5"]
-#: the kinds that are particle filters (they take N, a random stream, fusion and recovery)
-PARTICLE_KINDS = ("pf", "rpf")
-#: the kinds of sensor an operator may have (tltrack.models.from_config builds them)
-SensorKind = Literal["range-bearing", "bearing", "position", "range-bearing-doppler"]
-#: each kind's noise parameters and their defaults (None: the config's flat field of that name)
-SENSOR_PARAMETERS: dict[str, dict[str, float | None]] = {
-    "range-bearing": {"sigma_r": None, "sigma_bearing": None},
-    "bearing": {"sigma_bearing": None},
-    "position": {"sigma_pos": 10.0},
-    "range-bearing-doppler": {"sigma_r": None, "sigma_bearing": None, "sigma_rr": 1.0},
-}
-#: measurement components per sensor kind
-SENSOR_NZ = {"range-bearing": 2, "bearing": 1, "position": 2, "range-bearing-doppler": 3}
 
-_DEG = math.pi / 180.0
-
-#: Scenario 1 (constant velocity) and Scenario 2 (coordinated turn), as printed in the seed, and a
-#: constant-acceleration scenario of ours: x = [x, vx, ax, y, vy, ay], a slow target (a boat, a
-#: drone) starting where Scenario 2 does at 30 m/s with a 0.5 m/s^2 lateral acceleration, so that
-#: it stays within about 5 km of the sensors over 100 steps; q1 is the variance of the
-#: acceleration's increment per step (m^2/s^4, a discrete Wiener-process acceleration): it
-#: wanders by about 0.1 m/s^2 per step.
-SCENARIO_DEFAULTS: dict[str, dict[str, Any]] = {
-    "cv": {
-        "x0": [100.0, 10.0, 100.0, 10.0],
-        "P0_diag": [50.0, 1.0, 50.0, 1.0],
-        "q1": 0.1,
-        "q2": 0.0,
-    },
-    "ct": {
-        "x0": [1000.0, 300.0, 1000.0, 0.0, -3.0 * _DEG],
-        "P0_diag": [100.0, 10.0, 100.0, 10.0, 100e-3],
-        "q1": 0.1,
-        "q2": 1.75e-2,
-    },
-    "ca": {
-        "x0": [1000.0, 30.0, 0.0, 1000.0, 0.0, 0.5],
-        "P0_diag": [100.0, 10.0, 0.1, 100.0, 10.0, 0.1],
-        "q1": 0.01,
-        "q2": 0.0,
-    },
-}
-
-#: the state dimension of each scenario's motion model
-STATE_DIM = {"cv": 4, "ct": 5, "ca": 6}
-
-#: Differences of each preset from the seed's values, per scenario (none where it names none).
+#: Differences of each preset from the seed's values (the motion models' ``defaults``), per
+#: scenario (none where it names none).
 PRESET_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
     "paper": {},
     "arasaratnam-haykin": {"ct": {"q2": 1.75e-4, "P0_diag": [100.0, 10.0, 100.0, 10.0, 1e-4]}},
@@ -81,8 +49,38 @@ PRESET_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
 
 def preset_values(scenario: str, preset: str) -> dict[str, Any]:
     """The scenario's seed values with the preset's differences applied."""
-    return {**SCENARIO_DEFAULTS[scenario], **PRESET_OVERRIDES[preset].get(scenario, {})}
+    defaults = MOTIONS.get(scenario).defaults
+    return {**defaults, **PRESET_OVERRIDES[preset].get(scenario, {})}
 
+
+def trusted(info: ValidationInfo) -> bool:
+    """Was this validation asked for by the user's own file or command line (not a message)?
+
+    Only then may a kind be named by its import path (:mod:`tltrack.declare`).
+    """
+    return bool(info.context and info.context.get("trusted"))
+
+
+def _kind(registry: Any, name: str, info: ValidationInfo) -> str:
+    """``name`` as its registry's declared kind, or a validation error of type ``unknown_kind``."""
+    try:
+        return str(registry.canonical(name, trusted=trusted(info)))
+    except UnknownKindError as err:
+        raise PydanticCustomError("unknown_kind", "{msg}", {"msg": str(err)}) from None
+
+
+def unit(u: str) -> dict[str, Any]:
+    """A field's unit, for ``json_schema_extra``: every numeric field declares one (SI; "1" for
+    a pure number or a count)."""
+    return {"unit": u}
+
+
+def _filter_kind(v: str) -> str:
+    return FILTERS.canonical(v, trusted=True)
+
+
+#: a filter kind in a service's own settings (trusted: a plugin may be named by import path)
+FilterKindName = Annotated[str, AfterValidator(_filter_kind)]
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
@@ -91,32 +89,55 @@ Point = tuple[FiniteFloat, FiniteFloat]
 
 
 class SensorSpec(BaseModel):
-    """One operator's sensor: its kind, where it sits, and the noise parameters of that kind.
+    """One operator's sensor: its kind, where it sits, and the parameters its kind declares.
 
-    A parameter left out takes its default (:data:`SENSOR_PARAMETERS`); one that the kind does not
-    have is refused. The operator's intensity I_w scales the resulting noise covariance.
+    Fields every sensor has (``position``) are declared here; the kind's own parameters (its
+    class's ``parameters``, :mod:`tltrack.models.kinds`) sit beside ``kind``, and one that the
+    kind does not declare is refused. A parameter left out takes its default. The operator's
+    intensity I_w scales the resulting noise covariance.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="allow", frozen=True)
 
-    kind: SensorKind = "range-bearing"
-    position: Point | None = None
-    sigma_r: Positive | None = None
-    sigma_bearing: Positive | None = None
-    sigma_pos: Positive | None = None
-    sigma_rr: Positive | None = None
+    kind: str = Field("range-bearing", description="a registered sensor kind")
+    position: Point | None = Field(
+        None, description="where the sensor sits (x, y)", json_schema_extra=unit("m")
+    )
+
+    @field_validator("kind")
+    @classmethod
+    def _registered(cls, v: str, info: ValidationInfo) -> str:
+        return _kind(SENSORS, v, info)
 
     @model_validator(mode="after")
     def _parameters_of_its_kind(self) -> SensorSpec:
-        own = SENSOR_PARAMETERS[self.kind]
-        for name in ("sigma_r", "sigma_bearing", "sigma_pos", "sigma_rr"):
-            if getattr(self, name) is not None and name not in own:
-                raise ValueError(f"{name} is not a parameter of a {self.kind} sensor")
+        declared = {p.name: p for p in self.declared}
+        extra = self.__pydantic_extra__ or {}
+        for name, value in extra.items():
+            if name not in declared:
+                own = ", ".join(declared) or "none"
+                raise ValueError(
+                    f"{name} is not a parameter of a {self.kind} sensor (its parameters: {own})"
+                )
+            extra[name] = declared[name].check(value)
         return self
 
     @property
+    def declared(self) -> tuple[Parameter, ...]:
+        """The parameters its kind declares."""
+        return tuple(SENSORS.get(self.kind).parameters)
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The parameters given (a full :func:`~tltrack.engine.setup.sensor_spec` has them all)."""
+        return dict(self.__pydantic_extra__ or {})
+
+    @property
     def n_z(self) -> int:
-        return SENSOR_NZ[self.kind]
+        return len(SENSORS.get(self.kind).components)
+
+    def __hash__(self) -> int:
+        return hash((self.kind, self.position, tuple(sorted(self.params.items()))))
 
 
 class SourceSpec(BaseModel):
@@ -128,11 +149,24 @@ class SourceSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$")
-    intensity: float = Field(1.0, gt=0, allow_inf_nan=False)
-    position: Point | None = Field(None, description="the sensor's position; default (0, 0)")
+    intensity: float = Field(
+        1.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="its noise intensity I_w",
+        json_schema_extra=unit("1"),
+    )
+    position: Point | None = Field(
+        None, description="the sensor's position; default (0, 0)", json_schema_extra=unit("m")
+    )
     fault: SourceFault = "none"
-    filter: FilterKind | None = None
+    filter: str | None = Field(None, description="a registered filter kind")
     sensor: SensorSpec | None = Field(None, description="default: the paper's range-bearing")
+
+    @field_validator("filter")
+    @classmethod
+    def _registered(cls, v: str | None, info: ValidationInfo) -> str | None:
+        return None if v is None else _kind(FILTERS, v, info)
 
     @model_validator(mode="after")
     def _one_position(self) -> SourceSpec:
@@ -146,42 +180,99 @@ class Config(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    scenario: Scenario = "ct"
+    scenario: str = Field("ct", description="the truth's and the filters' motion model")
     preset: Preset = "paper"
-    Ts: float = Field(1.0, gt=0, allow_inf_nan=False, description="sampling period [s]")
-    K: int = Field(100, ge=1, le=100_000, description="time steps per run")
-    x0: list[float] = Field(description="true initial state")
-    P0_diag: list[float] = Field(description="diagonal of the initial covariance P0")
-    q1: float = Field(ge=0, allow_inf_nan=False, description="acceleration noise [m^2/s^4]")
-    q2: float = Field(ge=0, allow_inf_nan=False, description="turn-rate noise [rad^2/s^3]")
-    sigma_r: float = Field(10.0, gt=0, allow_inf_nan=False, description="range std [m]")
-    sigma_bearing: float = Field(
-        math.sqrt(10.0) * 1e-3, gt=0, allow_inf_nan=False, description="bearing std [rad]"
+    Ts: float = Field(
+        1.0, gt=0, allow_inf_nan=False, description="sampling period", json_schema_extra=unit("s")
     )
-    primary_intensity: float = Field(4.0, gt=0, allow_inf_nan=False)
-    primary_position: Point | None = Field(None, description="the sensor's position; (0, 0)")
+    K: int = Field(
+        100, ge=1, le=100_000, description="time steps per run", json_schema_extra=unit("1")
+    )
+    x0: list[float] = Field(
+        description="true initial state", json_schema_extra=unit("the motion model's components")
+    )
+    P0_diag: list[float] = Field(
+        description="diagonal of the initial covariance P0",
+        json_schema_extra=unit("the squares of the motion model's components"),
+    )
+    q1: float = Field(
+        ge=0,
+        allow_inf_nan=False,
+        description="acceleration noise",
+        json_schema_extra=unit("m^2/s^4"),
+    )
+    q2: float = Field(
+        ge=0,
+        allow_inf_nan=False,
+        description="turn-rate noise",
+        json_schema_extra=unit("rad^2/s^3"),
+    )
+    sigma_r: float = Field(
+        10.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="range std, for every sensor that does not set its own",
+        json_schema_extra=unit("m"),
+    )
+    sigma_bearing: float = Field(
+        math.sqrt(10.0) * 1e-3,
+        gt=0,
+        allow_inf_nan=False,
+        description="bearing std, for every sensor that does not set its own",
+        json_schema_extra=unit("rad"),
+    )
+    primary_intensity: float = Field(
+        4.0, gt=0, allow_inf_nan=False, description="the primary's I_w", json_schema_extra=unit("1")
+    )
+    primary_position: Point | None = Field(
+        None, description="the sensor's position; (0, 0)", json_schema_extra=unit("m")
+    )
     primary_sensor: SensorSpec | None = Field(None, description="default: the paper's radar")
     sources: list[SourceSpec] = Field(
         default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
     )
     truth: TruthMode = "fixed"
-    truth_seed: int = Field(0, ge=0)
+    truth_seed: int = Field(
+        0, ge=0, description="seed of the fixed truth", json_schema_extra=unit("1")
+    )
     truth_file: Path | None = Field(
         None, description="a recorded track (CSV t,x,y or t,lat,lon) as the truth"
     )
     truth_origin: tuple[Latitude, Longitude] | None = Field(
-        None, description="(lat, lon) of the frame's origin for a t,lat,lon truth file"
+        None,
+        description="(lat, lon) of the frame's origin for a t,lat,lon truth file",
+        json_schema_extra=unit("deg"),
     )
     truth_max_gap_s: float = Field(
-        120.0, gt=0, allow_inf_nan=False, description="longest gap between a truth file's reports"
+        120.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="longest gap between a truth file's reports",
+        json_schema_extra=unit("s"),
     )
-    seed: int = Field(0, ge=0)
-    particles: int = Field(6000, ge=10, le=10_000_000)
-    runs: int = Field(100, ge=1)
-    kappa: float = Field(2.0, allow_inf_nan=False, description="UKF scaling parameter")
-    lost_threshold_m: float = Field(100.0, gt=0, allow_inf_nan=False)
+    seed: int = Field(
+        0, ge=0, description="master seed of every random stream", json_schema_extra=unit("1")
+    )
+    particles: int = Field(
+        6000, ge=10, le=10_000_000, description="particles per PF", json_schema_extra=unit("1")
+    )
+    runs: int = Field(100, ge=1, description="Monte-Carlo runs", json_schema_extra=unit("1"))
+    kappa: float = Field(
+        2.0, allow_inf_nan=False, description="UKF scaling parameter", json_schema_extra=unit("1")
+    )
+    lost_threshold_m: float = Field(
+        100.0,
+        gt=0,
+        allow_inf_nan=False,
+        description="a run whose final error passes this is lost",
+        json_schema_extra=unit("m"),
+    )
     gate_probability: float = Field(
-        0.999, gt=0, lt=1, description="robust TL: probability an honest transfer passes the gate"
+        0.999,
+        gt=0,
+        lt=1,
+        description="robust TL: probability an honest transfer passes the gate",
+        json_schema_extra=unit("1"),
     )
     recovery: bool = Field(False, description="reinitialise a particle filter that lost track")
     rpf_bandwidth: float = Field(
@@ -190,14 +281,25 @@ class Config(BaseModel):
         lt=1,
         allow_inf_nan=False,
         description="rpf: the regularisation kernel's bandwidth h (0: off; docs/rpf.md)",
+        json_schema_extra=unit("1"),
     )
     transfer_budget: float | None = Field(
-        None, gt=0, le=1, description="robust TL: at most this share of steps with a transfer"
+        None,
+        gt=0,
+        le=1,
+        description="robust TL: at most this share of steps with a transfer",
+        json_schema_extra=unit("1"),
+    )
+    filter_options: dict[str, dict[str, float]] = Field(
+        default_factory=dict,
+        description="per filter kind, values of the parameters it declares (e.g. "
+        "{rpf = {rpf_beta = 0.5}}); a parameter that is also a top-level field is set there",
+        json_schema_extra=unit("each parameter's own"),
     )
 
     @model_validator(mode="before")
     @classmethod
-    def _fill_from_preset(cls, data: Any) -> Any:
+    def _fill_from_preset(cls, data: Any, info: ValidationInfo) -> Any:
         if not isinstance(data, dict):
             return data
         if data.get("truth_file") is not None:
@@ -208,13 +310,40 @@ class Config(BaseModel):
             data = {**data, "truth": "file"}
         scenario = data.get("scenario", "ct")
         preset = data.get("preset", "paper")
-        if scenario not in SCENARIO_DEFAULTS or preset not in PRESET_OVERRIDES:
+        if not isinstance(scenario, str) or preset not in PRESET_OVERRIDES:
             return data  # the field validators name the bad value
-        return {**preset_values(scenario, preset), **data}
+        try:
+            scenario = MOTIONS.canonical(scenario, trusted=trusted(info))
+        except UnknownKindError:
+            return data  # the scenario's validator names it
+        return {**preset_values(scenario, preset), **data, "scenario": scenario}
+
+    @field_validator("scenario")
+    @classmethod
+    def _registered(cls, v: str, info: ValidationInfo) -> str:
+        return _kind(MOTIONS, v, info)
+
+    @field_validator("filter_options")
+    @classmethod
+    def _declared_options(
+        cls, v: dict[str, dict[str, float]], info: ValidationInfo
+    ) -> dict[str, dict[str, float]]:
+        out = {}
+        for kind, values in v.items():
+            name = _kind(FILTERS, kind, info)
+            declared = {p.name: p for p in FILTERS.get(name).parameters}
+            for p in values:
+                if p not in declared:
+                    own = ", ".join(declared) or "none"
+                    raise ValueError(f"{kind}: {p} is not one of its parameters ({own})")
+                if p in cls.model_fields:
+                    raise ValueError(f"{kind}: set {p} as the top-level field {p}")
+            out[name] = {p: declared[p].check(x, f"{kind}.") for p, x in values.items()}
+        return out
 
     @model_validator(mode="after")
     def _check_dimensions(self) -> Config:
-        n = STATE_DIM[self.scenario]
+        n = len(MOTIONS.get(self.scenario).components)
         for name in ("x0", "P0_diag"):
             values = getattr(self, name)
             if len(values) != n:
@@ -233,6 +362,20 @@ class Config(BaseModel):
             raise ValueError("give either primary_position or primary_sensor.position, not both")
         return self
 
+    def filter_parameters(self, kind: str) -> dict[str, float]:
+        """The values of every parameter filter ``kind`` declares: a top-level field of that
+        name, else :attr:`filter_options`, else the declared default."""
+        out = {}
+        for p in FILTERS.get(kind).parameters:
+            given = self.filter_options.get(kind, {}).get(p.name)
+            if given is None and p.name in type(self).model_fields:
+                given = getattr(self, p.name)
+            value = p.default if given is None else given
+            if value is None:
+                raise ConfigError(f"filter kind {kind} needs {p.name} [{p.unit}]: {p.doc}")
+            out[p.name] = float(value)
+        return out
+
     @property
     def n_x(self) -> int:
         return len(self.x0)
@@ -242,16 +385,17 @@ class Config(BaseModel):
         """The first source: the paper's single source operator."""
         return self.sources[0]
 
-    def with_(self, **changes: Any) -> Config:
+    def with_(self, *, trusted_changes: bool = False, **changes: Any) -> Config:
         """A validated copy with some fields changed; raises :class:`ConfigError`.
 
         Changing the scenario or preset re-fills every field that still has the old preset's value.
+        ``trusted_changes``: the changes are the user's own (:func:`make_config`).
         """
         data = self.model_dump()
         if {"scenario", "preset"} & changes.keys():
             old = preset_values(self.scenario, self.preset)
             data = {k: v for k, v in data.items() if k not in old or old[k] != v}
-        return make_config(data, **changes)
+        return make_config(data, trusted=trusted_changes, **changes)
 
     def with_source_intensity(self, intensity: float) -> Config:
         """The same experiment with the (first) source's noise intensity changed."""
@@ -266,24 +410,33 @@ class ConfigError(ValueError):
 def describe_validation_error(err: ValidationError) -> str:
     """One line per problem, each starting with the field's dotted path."""
     lines = []
-    for e in err.errors():
+    errors = err.errors()
+    if any(e["type"] == "unknown_kind" and e["loc"] == ("scenario",) for e in errors):
+        errors = [e for e in errors if e["type"] != "missing"]  # no defaults without a scenario
+    for e in errors:
         loc = ".".join(str(p) for p in e["loc"]) or "(config)"
         lines.append(f"{loc}: {e['msg']}")
     return "; ".join(lines)
 
 
-def make_config(data: dict[str, Any] | None = None, **overrides: Any) -> Config:
-    """Build a config from a mapping plus keyword overrides, raising :class:`ConfigError`."""
+def make_config(
+    data: dict[str, Any] | None = None, *, trusted: bool = False, **overrides: Any
+) -> Config:
+    """Build a config from a mapping plus keyword overrides, raising :class:`ConfigError`.
+
+    ``trusted``: the mapping is the user's own (a file, the command line), so its kinds may be
+    named by import path and installed plugins are loaded (:mod:`tltrack.declare`).
+    """
     merged = {**(data or {}), **{k: v for k, v in overrides.items() if v is not None}}
     try:
-        return Config.model_validate(merged)
+        return Config.model_validate(merged, context={"trusted": trusted})
     except ValidationError as err:
         raise ConfigError(describe_validation_error(err)) from None
 
 
 def load_config(path: str | Path, **overrides: Any) -> Config:
-    """Load a TOML or JSON file (by extension); keyword overrides win over the file."""
-    return make_config(read_mapping(path), **overrides)
+    """Load the user's TOML or JSON file (by extension); keyword overrides win over the file."""
+    return make_config(read_mapping(path), trusted=True, **overrides)
 
 
 def read_mapping(path: str | Path) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from tltrack.config import Config
 from tltrack.engine import results
 from tltrack.engine.montecarlo import run_experiment, trace_run
 from tltrack.engine.scenario import truth
-from tltrack.models.from_config import motion_model
+from tltrack.engine.setup import Setup
 
 
 def run_and_save(
@@ -40,9 +40,10 @@ def draw(doc: dict[str, Any], out: Path) -> list[Path]:
     cfg = Config.model_validate(doc["config"])
     names = [n for n in doc["filters"] if "/" not in n]
     tracks = trace_run(cfg, [n for n in names if not n.startswith("source-")], run=0)
-    layout = motion_model(cfg).layout
+    setup = Setup(cfg)
+    layout = setup.layout
     xy = {name: layout.position(x.T).T for name, x in tracks.items()}
     return [
         plots.rmse_vs_time(doc, out / "rmse.png"),
-        plots.trajectory(layout.position(truth(cfg, 0).T).T, xy, out / "trajectory.png"),
+        plots.trajectory(layout.position(truth(setup, 0).T).T, xy, out / "trajectory.png"),
     ]

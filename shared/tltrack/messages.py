@@ -33,7 +33,8 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from tltrack.config import SENSOR_NZ, STATE_DIM, SensorSpec
+from tltrack.config import SensorSpec
+from tltrack.models.kinds import MOTIONS, SENSORS
 
 #: 2: Truth and EstimateMsg carry ``pos``, the position in ``x`` (the referee needs no state
 #: layout), EstimateMsg whether the filter was reinitialised (``recovered``), a Transfer the
@@ -45,8 +46,17 @@ MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
 SYMMETRY_RTOL = 1e-9
 MAX_K = 2**31 - 1
-STATE_SIZES = tuple(sorted(set(STATE_DIM.values())))  #: n_x of every scenario
-MEASUREMENT_SIZES = tuple(sorted(set(SENSOR_NZ.values())))  #: n_z of every sensor kind
+
+
+def state_sizes() -> tuple[int, ...]:
+    """n_x of every registered motion model."""
+    return tuple(sorted({len(MOTIONS.get(k).components) for k in MOTIONS.names()}))
+
+
+def measurement_sizes() -> tuple[int, ...]:
+    """n_z of every registered sensor kind."""
+    return tuple(sorted({len(SENSORS.get(k).components) for k in SENSORS.names()}))
+
 
 #: Every ``MessageRejected.reason``.
 REASONS = (
@@ -59,6 +69,7 @@ REASONS = (
     "non_finite",  # NaN or infinity
     "not_symmetric",  # covariance asymmetric beyond SYMMETRY_RTOL
     "not_spd",  # covariance not positive-definite (Cholesky failed)
+    "unknown_kind",  # names a sensor, motion or filter kind the receiver has not registered
     "invalid",  # any other schema violation (missing field, wrong type, out of range...)
     "internal",  # the validator itself failed: a bug, still reported as a rejection
 )
@@ -137,7 +148,9 @@ def _sensor_spec(v: Any) -> Any:
         first = err.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "its parameters"
         detail = {"where": where, "msg": first["msg"]}
-        reason = "non_finite" if first["type"] == "finite_number" else "invalid"
+        reason = {"finite_number": "non_finite", "unknown_kind": "unknown_kind"}.get(
+            first["type"], "invalid"
+        )
         raise PydanticCustomError(reason, "{where}: {msg}", detail) from None
 
 
@@ -204,7 +217,7 @@ class Measurement(Message):
     @field_validator("z")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, MEASUREMENT_SIZES, "z")
+        return _check_vector(v, measurement_sizes(), "z")
 
 
 class Truth(Message):
@@ -218,7 +231,7 @@ class Truth(Message):
     @field_validator("x")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, STATE_SIZES, "x")
+        return _check_vector(v, state_sizes(), "x")
 
     @field_validator("pos")
     @classmethod
@@ -272,7 +285,7 @@ class EstimateMsg(Message):
     @field_validator("x")
     @classmethod
     def _x_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, STATE_SIZES, "x")
+        return _check_vector(v, state_sizes(), "x")
 
     @field_validator("pos")
     @classmethod
@@ -302,14 +315,17 @@ class EpisodeStart(Message):
     @field_validator("config")
     @classmethod
     def _config_ok(cls, v: dict[str, Any]) -> dict[str, Any]:
-        from tltrack.config import ConfigError, make_config
+        from tltrack.config import Config, describe_validation_error
 
         if not _all_finite(v):
             raise PydanticCustomError("non_finite", "config holds a NaN or infinity")
-        try:
-            cfg = make_config(v)
-        except ConfigError as err:
-            raise PydanticCustomError("invalid", "config: {detail}", {"detail": str(err)}) from None
+        try:  # untrusted: a kind it names must be registered here; nothing is imported
+            cfg = Config.model_validate(v, context={"trusted": False})
+        except ValidationError as err:
+            unknown = any(e["type"] == "unknown_kind" for e in err.errors())
+            detail = {"detail": describe_validation_error(err)}
+            reason = "unknown_kind" if unknown else "invalid"
+            raise PydanticCustomError(reason, "config: {detail}", detail) from None
         return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
 
     def parsed_config(self) -> Any:

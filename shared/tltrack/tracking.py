@@ -14,18 +14,17 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
-from tltrack.config import Config, SensorSpec
-from tltrack.engine.montecarlo import check_filters, reported_name
-from tltrack.engine.registry import build, parse, recovery
+from tltrack.config import Config
+from tltrack.engine.driver import Link, Primaries, Sources, StepRecord, reported_name
+from tltrack.engine.montecarlo import check_filters
+from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import initial_estimate
-from tltrack.filters.base import Array, Estimate, Filter
-from tltrack.filters.decision import TransferPolicy
-from tltrack.filters.transfer import Primary, Source
+from tltrack.engine.setup import PRIMARY, Setup, from_spec
+from tltrack.filters.base import Array, Estimate
 from tltrack.held import Handling, Held
 from tltrack.messages import (
     EpisodeEnd,
@@ -36,15 +35,7 @@ from tltrack.messages import (
     RejectCounter,
     Transfer,
 )
-from tltrack.models.base import Layout, MeasurementModel, PositionFix
-from tltrack.models.from_config import (
-    PRIMARY,
-    from_spec,
-    intensity,
-    motion_model,
-    sensor,
-    sensor_spec,
-)
+from tltrack.models.base import Layout, PositionFix
 from tltrack.models.observation import Observation
 from tltrack.service import Service
 from tltrack.transport import Received, decode_received
@@ -52,37 +43,15 @@ from tltrack.transport import Received, decode_received
 T = TypeVar("T")
 
 
-def _filter(cfg: Config, name: str, run: int, source_id: str | None = None) -> Filter:
-    x0_hat = initial_estimate(cfg, run)[:, None]
-    return build(parse(name), cfg, motion_model(cfg), x0_hat, [run], source_id)
-
-
-@dataclass(frozen=True)
-class OwnSensor:
-    """An operator's sensor and its Q_w: what turns its Measurement into an Observation."""
-
-    model: MeasurementModel
-    R: Array
-
-    @classmethod
-    def of(cls, cfg: Config, sensor_id: str) -> OwnSensor:
-        s = sensor(cfg, sensor_id)
-        return cls(s, s.R(intensity(cfg, sensor_id)))
-
-    def observe(self, msg: Measurement) -> Observation:
-        """z_k with the sensor's own Q_w."""
-        return Observation.broadcast(self.model, np.asarray(msg.z), self.R)
-
-
-@lru_cache(maxsize=64)
-def _described(spec: SensorSpec, layout: Layout) -> MeasurementModel:
-    return from_spec(spec, layout)
+def _start(cfg: Config, run: int) -> tuple[Setup, Array]:
+    """The episode's models and run ``run``'s x0_hat (n_x, 1): as the engine starts that run."""
+    return Setup(cfg), initial_estimate(cfg, run)[:, None]
 
 
 def transfer(msg: Transfer, source_id: str, layout: Layout) -> Observation:
     """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor,
     which the transfer itself describes."""
-    s = _described(msg.sensor, layout)
+    s = from_spec(msg.sensor, layout)
     obs = Observation.broadcast(s, np.asarray(msg.eta), np.asarray(msg.P_eta))
     return dataclasses.replace(obs, origin=source_id)
 
@@ -141,25 +110,36 @@ class StepReport:
 
 
 class SourceEpisode:
-    """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1)."""
+    """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1).
+
+    The step driver's source half (:class:`~tltrack.engine.driver.Sources`) with one filter.
+    """
 
     def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
         self.cfg, self.source_id = cfg, source_id
-        self.layout = motion_model(cfg).layout
+        setup, x0_hat = _start(cfg, run)
+        self.layout = setup.layout
+        self.own = setup.sensors[source_id]
         spec = parse(f"source-{kind}")
         self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
-        self.sensor = OwnSensor.of(cfg, source_id)
-        self.sensor_spec = sensor_spec(cfg, source_id)  #: what its transfers say it is
-        filt = _filter(cfg, spec.name, run, source_id)
-        self.role = Source(filt, self.sensor.model, self.sensor.R, recovery(spec, cfg))
+        self._link: Link = (spec.name, source_id)
+        self._estimates: dict[str, Estimate] = {}
+        self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep])
+        self.k = 0
+
+    def _keep(self, record: StepRecord) -> None:
+        self._estimates[record.name] = record.estimate
 
     @property
     def n_z(self) -> int:
-        return self.sensor.model.n_z
+        return self.own.model.n_z
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
-        return self.role.step(None if z is None else self.sensor.observe(z))
+        self.k += 1
+        obs = None if z is None else self.own.observe(np.asarray(z.z))
+        eta = self._half.step(self.k, {self.source_id: obs})[self._link]
+        return self._estimates.pop(self.name), eta
 
     def transfer_message(self, eta: Observation, episode: str, k: int, t_sensor: float) -> Transfer:
         """What it sends after step ``k``: (eta_hat, P_eta_eta) for step k + 1, described by its
@@ -170,7 +150,7 @@ class SourceEpisode:
             k=k,
             t_sensor=t_sensor,
             k_apply=k + 1,
-            sensor=self.sensor_spec,
+            sensor=self.own.spec,
             eta=eta.mean[:, 0],
             P_eta=wire_covariance(eta.cov[0]),
         )
@@ -178,34 +158,40 @@ class SourceEpisode:
     @property
     def recovered(self) -> bool:
         """Did the last step reinitialise the filter (it had lost the track)?"""
-        return _any(self.role.recovered)
+        return self._half.recovered(self._link)
 
 
 class PrimaryEpisode:
     """Algorithm 2 for one episode, with an isolated twin run alongside for comparison.
 
-    ``robust`` makes it ``robust-tl-<kind>``: transfers are first judged for consistency (and the
-    config's budget), exactly as the engine's filter of that name; its isolated twin is then the
-    one it rolls back to.
+    The step driver's primary half (:class:`~tltrack.engine.driver.Primaries`) with two filters:
+    ``tl-<kind>`` and ``<kind>``. ``robust`` makes the first ``robust-tl-<kind>``: transfers are
+    first judged for consistency (and the config's budget), exactly as the engine's filter of
+    that name; its twin is then the isolated filter, which it rolls back to.
     """
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
-        self.layout = motion_model(cfg).layout
-        self.sensor = OwnSensor.of(cfg, PRIMARY)
+        setup, x0_hat = _start(cfg, run)
+        self.layout = setup.layout
+        self.own = setup.sensors[PRIMARY]
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
         if robust:
             check_filters(cfg, [self.tl_name])
-        policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget) if robust else None
-        self.iso = Primary(
-            _filter(cfg, self.iso_name, run), None, recovery(parse(self.iso_name), cfg)
-        )
-        self.tl = Primary(
-            _filter(cfg, self.tl_name, run),
-            policy,
-            recovery(parse(self.tl_name), cfg),
-            twin=self.iso if robust else None,
-        )
+        specs = [parse(self.tl_name), parse(self.iso_name)]
+        self._half = Primaries(setup, specs, x0_hat, [run], share_twins=True)
+        self._k = {self.tl_name: 0, self.iso_name: 0}
+
+    def _observe(self, z: Measurement | None) -> Observation | None:
+        return None if z is None else self.own.observe(np.asarray(z.z))
+
+    def _step(self, name: str, z: Measurement | None, extra: list[Observation]) -> Estimate:
+        self._k[name] += 1
+
+        def feed(spec: FilterSpec) -> list[Observation]:
+            return extra if spec.role in ("tl", "robust") else []
+
+        return self._half.step(self._k[name], self._observe(z), feed, only=[name])[name]
 
     def step(self, z: Measurement | None, transfers: dict[str, Transfer]) -> Estimate:
         """The TL estimate at k; ``transfers`` maps source id -> its transfer for k. The isolated
@@ -215,18 +201,17 @@ class PrimaryEpisode:
         Transfers come in the engine's order: the episode's sources first, then any other
         source (each transfer describes its own sensor), by id.
         """
-        obs = None if z is None else self.sensor.observe(z)
         known = [s.id for s in self.cfg.sources]
         order = [*known, *sorted(set(transfers) - set(known))]
         extra = [transfer(transfers[sid], sid, self.layout) for sid in order if sid in transfers]
-        if self.tl.policy is not None:  # robust: only what it can judge (check_filters)
+        if self.twin_in_step:  # robust: only what it can judge (check_filters)
             extra = [t for t in extra if isinstance(t.sensor, PositionFix)]
-        return self.tl.step(obs, extra)
+        return self._step(self.tl_name, z, extra)
 
     @property
     def twin_in_step(self) -> bool:
         """Does :meth:`step` step the twin too? A robust primary judges transfers against it."""
-        return self.tl.twin is not None
+        return self._half.robust(self.tl_name)
 
     def step_twin(self, z: Measurement | None) -> Estimate:
         """The isolated twin's estimate at the step of ``z``, the steps taken in order.
@@ -236,13 +221,11 @@ class PrimaryEpisode:
         already stepped inside :meth:`step`: this is that estimate, so call it before the next
         :meth:`step`.
         """
-        if self.tl.twin_estimate is not None:
-            return self.tl.twin_estimate
-        return self.iso.step(None if z is None else self.sensor.observe(z))
+        return self._step(self.iso_name, z, [])
 
     @property
     def n_z(self) -> int:
-        return self.sensor.model.n_z
+        return self.own.model.n_z
 
     @property
     def names(self) -> tuple[str, str]:
@@ -252,22 +235,17 @@ class PrimaryEpisode:
     @property
     def used_transfer(self) -> bool:
         """Did the last TL step use a transfer (a robust primary may have judged it out)?"""
-        return self.tl.used is not None and bool(self.tl.used.any())
+        return self._half.used(self.tl_name)
 
     @property
     def recovered(self) -> tuple[bool, bool]:
         """Did the last step reinitialise (TL filter, isolated filter)?"""
-        twin = self.tl.twin if self.tl.twin is not None else self.iso
-        return _any(self.tl.recovered), _any(twin.recovered)
+        return self._half.recovered(self.tl_name), self._half.recovered(self.iso_name)
 
     @property
     def rolled_back(self) -> bool:
         """Did the last step roll the robust primary back to its isolated twin?"""
-        return self.tl.rolled_back is not None and bool(self.tl.rolled_back.any())
-
-
-def _any(runs: np.ndarray | None) -> bool:
-    return runs is not None and bool(runs.any())
+        return self._half.rolled_back(self.tl_name)
 
 
 class StepQueue(Generic[T]):

@@ -15,8 +15,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.engine.setup import Setup
 from tltrack.models.base import MeasurementModel
-from tltrack.models.from_config import motion_model
 
 BIAS_SIGMAS = 10.0
 GHOST_DRIFT_M = 3.0  #: per step, in x and in y
@@ -29,13 +29,13 @@ def _fault(cfg: Config, sensor_id: str) -> str:
     return next((s.fault for s in cfg.sources if s.id == sensor_id), "none")
 
 
-def observed_truth(cfg: Config, sensor_id: str, x: Array) -> Array:
+def observed_truth(setup: Setup, sensor_id: str, x: Array) -> Array:
     """The trajectory a sensor actually observes: the truth, or a diverged source's ghost."""
-    if _fault(cfg, sensor_id) != "diverged":
+    if _fault(setup.cfg, sensor_id) != "diverged":
         return x
     ghost = x.copy()
     drift = GHOST_DRIFT_M * np.arange(len(x))
-    ix, iy = motion_model(cfg).layout.pos
+    ix, iy = setup.layout.pos
     ghost[:, ix] += drift
     ghost[:, iy] += drift
     return ghost

@@ -12,29 +12,26 @@ error). Lost runs count (no filter is ever reinitialised here).
 
 from __future__ import annotations
 
-import copy
 import os
-import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import nullcontext
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import PARTICLE_KINDS, Config
+from tltrack.config import Config
+from tltrack.engine.driver import Direct, Driver, StepRecord, primary_specs, source_links
 from tltrack.engine.faults import transfer_lag
-from tltrack.engine.registry import FilterSpec, build, parse, recovery, source_name
+from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
 from tltrack.filters.base import Estimate, Filter
-from tltrack.filters.decision import TransferPolicy, position_fix
+from tltrack.filters.decision import position_fix
 from tltrack.filters.kernels.moments import spread_coordinates
-from tltrack.filters.transfer import Primary, Source
 from tltrack.filters.warm import warm_up
-from tltrack.models.base import Layout, MotionModel
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
-from tltrack.models.observation import Observation
+from tltrack.models.base import Layout
 
 Array = NDArray[np.float64]
 
@@ -72,32 +69,8 @@ class FilterStats:
 
 def expand(names: Sequence[str], cfg: Config) -> list[FilterSpec]:
     """The requested filters plus the sources each TL filter needs, sources first."""
-    return list(
-        dict.fromkeys([*(parse(n) for n, _ in source_filters(names, cfg)), *_primaries(names)])
-    )
-
-
-def _primaries(names: Sequence[str]) -> list[FilterSpec]:
-    return [s for s in (parse(n) for n in dict.fromkeys(names)) if s.role != "source"]
-
-
-def source_filters(names: Sequence[str], cfg: Config) -> list[tuple[str, str]]:
-    """(source filter, source id) of every source filter to run: those the TL filters listen to,
-    and those asked for by name (for every source)."""
-    ids = [s.id for s in cfg.sources]
-    pairs = []
-    for spec in (parse(n) for n in dict.fromkeys(names)):
-        if spec.role in ("tl", "robust"):
-            pairs += [(source_name(spec, cfg, sid), sid) for sid in ids]
-    pairs += [
-        (spec.name, sid) for spec in map(parse, names) if spec.role == "source" for sid in ids
-    ]
-    return list(dict.fromkeys(pairs))
-
-
-def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
-    """``source-pf`` for the paper's single source; ``source-pf/<id>`` when there are several."""
-    return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
+    links = source_links(names, Setup(cfg))
+    return list(dict.fromkeys([*(parse(n) for n, _ in links), *primary_specs(names)]))
 
 
 def nees(d: Array, P: Array, rcond: float = 1e-10) -> tuple[Array, NDArray[np.bool_]]:
@@ -154,6 +127,36 @@ class _Score:
         return self.stats
 
 
+class Scores:
+    """A collector (:mod:`~tltrack.engine.driver`): every filter's errors against the truth
+    (K + 1, B, n_x) of a batch, and with ``timing`` its wall time per step."""
+
+    def __init__(self, truth: Array, layout: Layout, timing: bool, keep_tracks: bool) -> None:
+        self.truth, self.layout = truth, layout
+        self.timing, self.keep_tracks = timing, keep_tracks
+        self._scores: dict[str, _Score] = {}
+        self._filters: dict[str, Filter] = {}
+
+    def __call__(self, record: StepRecord) -> None:
+        r = record
+        score = self._scores.get(r.name)
+        if score is None:
+            score = self._scores[r.name] = _Score(
+                len(self.truth) - 1, self.layout, self.keep_tracks
+            )
+        if self.timing:
+            score.stats.step_ms.append(r.seconds * 1e3)
+        score.add(r.k, r.estimate, self.truth[r.k])
+        if r.used is not None:
+            score.stats.transfer_steps += int(r.used.sum())
+        self._filters[r.name] = r.filter
+
+    def close(self) -> dict[str, FilterStats]:
+        for name, filt in self._filters.items():
+            self._scores[name].stats.regularised = _regularised(filt)
+        return {name: s.close() for name, s in self._scores.items()}
+
+
 def run_batch(
     cfg: Config,
     names: Sequence[str],
@@ -174,8 +177,9 @@ def check_filters(cfg: Config, names: Sequence[str]) -> None:
     """Refuse, before any run, filters that cannot work with the configured sensors: a
     ``ValueError`` that says why (robust transfer needs sensors that fix a position)."""
     if any(parse(n).role == "robust" for n in names):
-        for sid in [PRIMARY, *(s.id for s in cfg.sources)]:
-            position_fix(sensor(cfg, sid))
+        setup = Setup(cfg)
+        for sid in setup.sensor_ids:
+            position_fix(setup.sensor(sid))
 
 
 def check_sweep(cfgs: Sequence[Config]) -> None:
@@ -207,123 +211,27 @@ def run_sweep_batch(
     every configuration: the results are those of separate batches, at a fraction of the cost.
     """
     check_sweep(cfgs)
-    cfg = cfgs[0]
-    model = motion_model(cfg)
-    K = cfg.K
-    sims = [[simulate(c, r) for r in runs] for c in cfgs]
+    setups = [Setup(c) for c in cfgs]
+    base = setups[0]
+    sims = [[simulate(s, r) for r in runs] for s in setups]
     x0_hat = np.stack([s.x0_hat for s in sims[0]], axis=1)  # (n, B)
     truth = np.stack([s.truth for s in sims[0]], axis=1)  # (K + 1, B, n)
-    source_ids = [s.id for s in cfg.sources]
-    z_src = {i: np.stack([s.z[i] for s in sims[0]], axis=2) for i in source_ids}  # (K, n_z, B)
-    meas = {i: (sensor(cfg, i), sensor(cfg, i).R(intensity(cfg, i))) for i in source_ids}
-
-    def observation(sensor_id: str, k: int) -> Observation:
-        s, R = meas[sensor_id]
-        return Observation.broadcast(s, z_src[sensor_id][k - 1], R)
-
-    specs = _primaries(names)
-    sources: dict[tuple[str, str], Source] = {}
-    labels: dict[tuple[str, str], str] = {}  # each source filter's reported name
-    source_scores: dict[str, _Score] = {}
-    for name, sid in source_filters(names, cfg):
-        spec = parse(name)
-        filt = build(spec, cfg, model, x0_hat, runs, source_id=sid)
-        sources[name, sid] = Source(filt, *meas[sid], recovery(spec, cfg))
-        labels[name, sid] = reported_name(spec, sid, len(source_ids))
-        source_scores[labels[name, sid]] = _Score(K, model.layout, keep_tracks)
-    variants = [
-        _PrimaryVariant(c, [s.z[PRIMARY] for s in sim], specs, model, x0_hat, runs, keep_tracks)
-        for c, sim in zip(cfgs, sims, strict=True)
-    ]
-
-    lag = {sid: transfer_lag(cfg, sid) for sid in source_ids}
-    made: dict[tuple[str, str], dict[int, Observation]] = {key: {} for key in sources}
-    for k in range(1, K + 1):
-        for (name, sid), src in sources.items():
-            t0 = time.perf_counter()
-            est, transfer = src.step(observation(sid, k))
-            score = source_scores[labels[name, sid]]
-            _tick(score, timing, t0)
-            score.add(k, est, truth[k])
-            # made at k, applies at k_apply = k + 1; named by its source, as a live one is
-            made[name, sid][k + 1] = replace(transfer, origin=sid)
-            made[name, sid].pop(k - lag[sid] - 1, None)
-
-        def transfers(spec: FilterSpec, k: int = k) -> list[Observation]:
-            if spec.role in ("tl", "robust"):  # none at k = 1
-                return [
-                    t
-                    for sid in source_ids
-                    if (t := made[source_name(spec, cfg, sid), sid].get(k - lag[sid])) is not None
-                ]
-            if spec.role == "fusion":
-                return [observation(sid, k) for sid in source_ids]
-            return []
-
-        for v in variants:
-            v.step(k, transfers, truth[k], timing)
-    for key, src in sources.items():
-        source_scores[labels[key]].stats.regularised = _regularised(src.filter)
-    source_stats = {name: s.close() for name, s in source_scores.items()}
-    # Each configuration reports the shared sources as its own (copies: merges must not alias).
-    return [
-        {**{n: copy.deepcopy(s) for n, s in source_stats.items()}, **v.close()} for v in variants
-    ]
-
-
-class _PrimaryVariant:
-    """The primaries of one configuration of a sweep, with their own measurement z_k."""
-
-    def __init__(
-        self,
-        cfg: Config,
-        z: list[Array],
-        specs: Sequence[FilterSpec],
-        model: MotionModel,
-        x0_hat: Array,
-        runs: Sequence[int],
-        keep_tracks: bool,
-    ) -> None:
-        self.sensor = sensor(cfg)
-        self.R = self.sensor.R(intensity(cfg))
-        self.z = np.stack(z, axis=2)  # (K, n_z, B)
-        self.primaries: dict[str, tuple[FilterSpec, Primary]] = {}
-        self.scores: dict[str, _Score] = {}
-        for spec in specs:
-            policy = (
-                TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
-                if spec.role == "robust"
-                else None
-            )
-            filt = build(spec, cfg, model, x0_hat, runs)
-            twin = None
-            if spec.role == "robust":  # its isolated twin, on the same random numbers
-                iso = build(parse(spec.kind), cfg, model, x0_hat, runs)
-                twin = Primary(iso, None, recovery(spec, cfg))
-            self.primaries[spec.name] = (spec, Primary(filt, policy, recovery(spec, cfg), twin))
-            self.scores[spec.name] = _Score(cfg.K, model.layout, keep_tracks)
-
-    def step(
-        self,
-        k: int,
-        transfers: Callable[[FilterSpec], list[Observation]],
-        truth_k: Array,
-        timing: bool,
-    ) -> None:
-        own = Observation.broadcast(self.sensor, self.z[k - 1], self.R)
-        for name, (spec, prim) in self.primaries.items():
-            extra = transfers(spec)
-            t0 = time.perf_counter()
-            est = prim.step(own, extra)
-            _tick(self.scores[name], timing, t0)
-            self.scores[name].add(k, est, truth_k)
-            if prim.used is not None:
-                self.scores[name].stats.transfer_steps += int(prim.used.sum())
-
-    def close(self) -> dict[str, FilterStats]:
-        for name, (_spec, prim) in self.primaries.items():
-            self.scores[name].stats.regularised = _regularised(prim.filter)
-        return {name: s.close() for name, s in self.scores.items()}
+    # sensor id -> (K, n_z, B), per configuration (the sources' are the same in all)
+    z = [{i: np.stack([s.z[i] for s in sim], axis=2) for i in base.sensor_ids} for sim in sims]
+    scores = [Scores(truth, base.layout, timing, keep_tracks) for _ in setups]
+    lag = {sid: transfer_lag(base.cfg, sid) for sid in base.source_ids}
+    driver = Driver(
+        setups, names, x0_hat, runs, channel=Direct(lag), collectors=[[s] for s in scores]
+    )
+    for k in range(1, base.cfg.K + 1):
+        driver.step(
+            k,
+            [
+                {i: s.sensors[i].observe(zi[i][k - 1]) for i in s.sensor_ids}
+                for s, zi in zip(setups, z, strict=True)
+            ],
+        )
+    return [s.close() for s in scores]
 
 
 def _regularised(filt: Filter) -> int:
@@ -339,11 +247,6 @@ def trace_run(cfg: Config, names: Sequence[str], run: int) -> dict[str, Array]:
     return {
         n: s.tracks[0][:, 0, :] for n, s in run_batch(cfg, names, [run], keep_tracks=True).items()
     }
-
-
-def _tick(score: _Score, timing: bool, t0: float) -> None:
-    if timing:
-        score.stats.step_ms.append((time.perf_counter() - t0) * 1e3)
 
 
 @dataclass(frozen=True)
@@ -384,7 +287,7 @@ def default_batch_size(cfg: Config, names: Sequence[str]) -> int:
     configurations (8 I_p of reproduce: ~0.1 GB a worker), while a batch cut to fit would leave
     the sigma-point filters stepping 3 runs at a time (measured 2.4x slower).
     """
-    pf_count = sum(1 for s in expand(names, cfg) if s.kind in PARTICLE_KINDS) or 1
+    pf_count = sum(1 for s in expand(names, cfg) if s.particle) or 1
     return int(np.clip(400_000 // (cfg.particles * pf_count), 1, 64))
 
 

@@ -18,31 +18,33 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import PARTICLE_KINDS, Config, FilterKind
+from tltrack.config import Config
+from tltrack.declare import UnknownKindError
+from tltrack.engine.setup import Setup
 from tltrack.engine.streams import streams
-from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.base import Filter
-from tltrack.filters.particle import ParticleFilter
+from tltrack.filters.kinds import FILTERS
 from tltrack.filters.recovery import Recovery
-from tltrack.filters.sigma_point import SigmaPointFilter, cubature3, cubature5, unscented
-from tltrack.models.base import MotionModel
 
-Kind = FilterKind
 Role = Literal["isolated", "tl", "robust", "source", "fusion"]
-KINDS: tuple[Kind, ...] = get_args(FilterKind)
 _PREFIX: dict[str, Role] = {"tl": "tl", "source": "source", "fusion": "fusion"}
 
 
 @dataclass(frozen=True)
 class FilterSpec:
     name: str
-    kind: Kind
+    kind: str
     role: Role
+
+    @property
+    def particle(self) -> bool:
+        """Does its kind draw particles (so fusion and recovery apply)?"""
+        return bool(FILTERS.get(self.kind).particle)
 
 
 def source_name(spec: FilterSpec, cfg: Config, source_id: str) -> str:
@@ -51,25 +53,30 @@ def source_name(spec: FilterSpec, cfg: Config, source_id: str) -> str:
     return f"source-{kind}"
 
 
-def parse(name: str) -> FilterSpec:
-    """``"tl-ckf5"`` -> FilterSpec("tl-ckf5", "ckf5", "tl"); refuses unknown names clearly."""
-    if name.startswith("robust-tl-") and name[len("robust-tl-") :] in KINDS:
-        return FilterSpec(name, name[len("robust-tl-") :], "robust")  # type: ignore[arg-type]
-    prefix, _, rest = name.partition("-")
-    role: Role = "isolated"
-    kind = name
-    if rest:
-        if prefix not in _PREFIX:
-            raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
-        role, kind = _PREFIX[prefix], rest
-    if kind not in KINDS or (role == "fusion" and kind not in PARTICLE_KINDS):
-        raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}")
-    return FilterSpec(name, kind, role)
+def parse(name: str, *, trusted: bool = False) -> FilterSpec:
+    """``"tl-ckf5"`` -> FilterSpec("tl-ckf5", "ckf5", "tl"); refuses unknown names clearly.
+
+    ``trusted``: the name is the user's own, so installed plugin kinds are loaded first.
+    """
+    if name.startswith("robust-tl-"):
+        role: Role = "robust"
+        kind = name[len("robust-tl-") :]
+    else:
+        prefix, _, rest = name.partition("-")
+        role, kind = (_PREFIX[prefix], rest) if rest and prefix in _PREFIX else ("isolated", name)
+    try:
+        cls = FILTERS.get(kind, trusted=trusted)
+    except UnknownKindError:
+        raise ValueError(f"unknown filter {name!r}; known: {', '.join(all_names())}") from None
+    if role == "fusion" and not cls.particle:
+        raise ValueError(f"{name!r}: centralized fusion is offered by particle filters only")
+    return FilterSpec(name, cls.kind, role)
 
 
 def all_names() -> list[str]:
-    names = [f"{p}{k}" for k in KINDS for p in ("", "tl-", "robust-tl-", "source-")]
-    return [*names, "fusion-pf"]
+    kinds = FILTERS.names()
+    names = [f"{p}{k}" for k in kinds for p in ("", "tl-", "robust-tl-", "source-")]
+    return [*names, *(f"fusion-{k}" for k in kinds if FILTERS.get(k).particle)]
 
 
 def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
@@ -84,30 +91,25 @@ def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
 
 def recovery(spec: FilterSpec, cfg: Config) -> Recovery | None:
     """The lost-track recovery of a particle filter, when the config asks for it."""
-    return Recovery(np.diag(cfg.P0_diag)) if cfg.recovery and spec.kind in PARTICLE_KINDS else None
+    return Recovery(np.diag(cfg.P0_diag)) if cfg.recovery and spec.particle else None
 
 
 def build(
     spec: FilterSpec,
-    cfg: Config,
-    model: MotionModel,
+    setup: Setup,
     x0_hat: NDArray[np.float64],
     runs: Sequence[int],
     source_id: str | None = None,
 ) -> Filter:
     """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0)."""
-    P0 = np.diag(cfg.P0_diag)
-    if spec.kind in PARTICLE_KINDS:
-        rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id))
-        if spec.kind == "pf":
-            return ParticleFilter(model, x0_hat, P0, cfg.particles, rngs)
-        return AuxiliaryParticleFilter(
-            model, x0_hat, P0, cfg.particles, rngs, bandwidth=cfg.rpf_bandwidth
-        )
-    n = model.n
-    rule = {
-        "ukf": lambda: unscented(n, cfg.kappa),
-        "ckf3": lambda: cubature3(n),
-        "ckf5": lambda: cubature5(n),
-    }[spec.kind]()
-    return SigmaPointFilter(model, rule, x0_hat, P0)
+    cfg = setup.cfg
+    cls = FILTERS.get(spec.kind)
+    rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id)) if cls.particle else None
+    return cls.build(
+        setup.motion,
+        x0_hat,
+        setup.P0,
+        particles=cfg.particles,
+        rngs=rngs,
+        params=cfg.filter_parameters(spec.kind),
+    )

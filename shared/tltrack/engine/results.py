@@ -14,10 +14,9 @@ import numpy as np
 import tltrack
 from tltrack.config import Config
 from tltrack.engine.montecarlo import FilterResult
-from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.truth_file import recorded_track
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 SCHEMA_VERSION = 1
 
@@ -46,18 +45,12 @@ def provenance() -> dict[str, Any]:
 
 def position_bounds(cfg: Config) -> dict[str, list[float]]:
     """PCRLB of the primary alone, and with every source's raw data, averaged over the truths."""
-    model = motion_model(cfg)
+    setup = Setup(cfg)
     runs = 1 if cfg.truth != "random" else cfg.runs
-    truths = np.stack([truth(cfg, r) for r in range(runs)])
-    P0 = np.diag(cfg.P0_diag)
-
-    def sensors(ids: list[str]) -> list[tuple[Any, Any]]:
-        return [(sensor(cfg, i), sensor(cfg, i).R(intensity(cfg, i))) for i in ids]
-
-    everyone = [PRIMARY, *(s.id for s in cfg.sources)]
+    truths = np.stack([truth(setup, r) for r in range(runs)])
     return {
-        "primary": pcrlb(model, sensors([PRIMARY]), truths, P0).tolist(),
-        "with_source": pcrlb(model, sensors(everyone), truths, P0).tolist(),
+        "primary": setup.pcrlb([PRIMARY], truths).tolist(),
+        "with_source": setup.pcrlb(setup.sensor_ids, truths).tolist(),
     }
 
 

@@ -22,18 +22,19 @@ from numpy.typing import NDArray
 
 from tltrack.config import Config
 from tltrack.engine.faults import miscalibration, observed_truth
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
 from tltrack.engine.truth_file import file_truth
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 Array = NDArray[np.float64]
 
 
-def truth(cfg: Config, run: int) -> Array:
+def truth(setup: Setup, run: int) -> Array:
     """The true states x_0..x_K of one run, shape (K + 1, n_x)."""
+    cfg = setup.cfg
     if cfg.truth == "file":
         return file_truth(cfg)
-    model = motion_model(cfg)
+    model = setup.motion
     x = np.empty((cfg.K + 1, cfg.n_x))
     x[0] = cfg.x0
     if cfg.truth == "noise-free":
@@ -51,13 +52,13 @@ def truth(cfg: Config, run: int) -> Array:
     return x
 
 
-def measurements(cfg: Config, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:
+def measurements(setup: Setup, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:
     """z_1..z_K of one sensor along truth ``x``, shape (K, n_z), angles wrapped to (-pi, pi]."""
-    s = sensor(cfg, sensor_id)
-    I_w = intensity(cfg, sensor_id)
-    g = stream(cfg.seed, run, f"meas/{sensor_id}")
-    seen = observed_truth(cfg, sensor_id, x)[1:]
-    return s.draw(seen, I_w, g, miscalibration(cfg, sensor_id, s, I_w))
+    s = setup.sensor(sensor_id)
+    I_w = setup.intensity(sensor_id)
+    g = stream(setup.cfg.seed, run, f"meas/{sensor_id}")
+    seen = observed_truth(setup, sensor_id, x)[1:]
+    return s.draw(seen, I_w, g, miscalibration(setup.cfg, sensor_id, s, I_w))
 
 
 def initial_estimate(cfg: Config, run: int) -> Array:
@@ -76,8 +77,8 @@ class Run:
     x0_hat: Array  # (n_x,)
 
 
-def simulate(cfg: Config, run: int) -> Run:
+def simulate(setup: Setup, run: int) -> Run:
     """The truth, every sensor's measurements and the initial estimate of one run."""
-    x = truth(cfg, run)
-    ids = [PRIMARY, *(s.id for s in cfg.sources)]
-    return Run(run, x, {i: measurements(cfg, run, x, i) for i in ids}, initial_estimate(cfg, run))
+    x = truth(setup, run)
+    z = {i: measurements(setup, run, x, i) for i in setup.sensor_ids}
+    return Run(run, x, z, initial_estimate(setup.cfg, run))

@@ -111,8 +111,8 @@ from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
 from tltrack.config import Config, ConfigError, make_config, read_mapping
+from tltrack.engine.setup import Setup
 from tltrack.models.angles import wrap_angle
-from tltrack.models.from_config import PRIMARY, sensor_spec
 
 Array = NDArray[np.float64]
 
@@ -532,14 +532,15 @@ def load_truth(
 # ---------------------------------------------------------------------------------- configuring
 
 
-def configure(data: Mapping[str, Any]) -> dict[str, Any]:
+def configure(data: Mapping[str, Any], *, trusted: bool = False) -> dict[str, Any]:
     """A config mapping with a ``truth_file``, completed from the file: ``truth = "file"``, K the
     file's length unless the mapping sets a shorter one, and x0 the track's first state unless
     the mapping sets one. Every sensor is then checked for clearance from the track.
 
     Entry points (``tltrack experiment``, ``study``, sensor_sim) run it on the mapping they build
     before making the :class:`~tltrack.config.Config`, so the config they share carries K and x0
-    explicitly: a tracker elsewhere never needs the file. Raises :class:`TruthFileError` or
+    explicitly: a tracker elsewhere never needs the file. ``trusted``: the mapping is the user's
+    own (:func:`~tltrack.config.make_config`). Raises :class:`TruthFileError` or
     :class:`~tltrack.config.ConfigError`.
     """
     if data.get("truth_file") is None:
@@ -550,7 +551,7 @@ def configure(data: Mapping[str, Any]) -> dict[str, Any]:
             f"truth: give either truth_file or truth (the mode {out['truth']!r}), not both"
         )
     out["truth"] = "file"
-    draft = make_config(out)  # the scenario, Ts and the sensors, validated
+    draft = make_config(out, trusted=trusted)  # the scenario, Ts and the sensors, validated
     track = recorded_track(draft)
     if "K" not in out:
         out["K"] = track.K
@@ -561,9 +562,9 @@ def configure(data: Mapping[str, Any]) -> dict[str, Any]:
         )
     if "x0" not in out:
         out["x0"] = _states(draft, track)[0].tolist()
-    cfg = make_config(out)
-    where = {sid: sensor_spec(cfg, sid).position or (0.0, 0.0) for sid in _sensor_ids(cfg)}
-    check_clearance(track.positions[: cfg.K + 1], where, name=track.name)
+    setup = Setup(make_config(out, trusted=trusted))
+    where = {sid: s.spec.position or (0.0, 0.0) for sid, s in setup.sensors.items()}
+    check_clearance(track.positions[: setup.cfg.K + 1], where, name=track.name)
     return out
 
 
@@ -572,7 +573,7 @@ def experiment_config(path: str | Path | None, **overrides: Any) -> Config:
     completed from its truth file (:func:`configure`) if it has one; raises ``ValueError``."""
     data = read_mapping(path) if path is not None else {}
     data |= {k: v for k, v in overrides.items() if v is not None}
-    return make_config(configure(data))
+    return make_config(configure(data, trusted=True), trusted=True)
 
 
 def file_truth(cfg: Config) -> Array:
@@ -590,10 +591,6 @@ def file_truth(cfg: Config) -> Array:
             "with tltrack.engine.truth_file.configure"
         )
     return x[: cfg.K + 1]
-
-
-def _sensor_ids(cfg: Config) -> list[str]:
-    return [PRIMARY, *(s.id for s in cfg.sources)]
 
 
 def recorded_track(cfg: Config) -> TruthTrack:

@@ -49,11 +49,14 @@ kernel for the models it lists; any other model runs the same algorithm in NumPy
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import auxiliary, gaussians
@@ -70,9 +73,73 @@ BETA = 0.3
 ESS_MIN = 0.1
 
 
+@dataclass(frozen=True)
+class Draw:
+    """What a :class:`Proposal` drew for a step: the ancestors (B, N + 1) chosen on the
+    look-ahead ``look_ahead`` (B, N) to the power ``beta``, whether each run's first stage
+    succeeded, the particles (n_x, B, N), and each particle's log p(x | x_anc) / q(x | x_anc)."""
+
+    ancestors: NDArray[np.int64]
+    look_ahead: Array
+    beta: float
+    ok: NDArray[np.bool_]
+    x: Array
+    log_prior_over_proposal: Array
+
+
+class Proposal(Protocol):
+    """Another second-stage proposal than the transition prior, passed in as a component.
+
+    The filter's second stage then weighs its draw exactly (the prior over the proposal enters
+    the weights), so any proposal keeps the posterior right. It runs on the generic path.
+    """
+
+    def draw(self, apf: AuxiliaryParticleFilter, observations: Sequence[Observation]) -> Draw:
+        """The step's draw, from the filter's public pieces (anchors, first_stage, ...)."""
+
+
 class AuxiliaryParticleFilter:
     """The auxiliary particle filter over B runs, with the :class:`~tltrack.filters.base.Filter`
-    interface; one random stream per run, as :class:`~tltrack.filters.particle.ParticleFilter`."""
+    interface; one random stream per run, as :class:`~tltrack.filters.particle.ParticleFilter`.
+
+    ``proposal``: a :class:`Proposal` in place of the transition prior (none: the prior).
+    """
+
+    kind: ClassVar[str] = "rpf"
+    particle: ClassVar[bool] = True
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("rpf_beta", "1", "rpf: the look-ahead's exponent beta", default=BETA, ge=0),
+        Parameter(
+            "rpf_bandwidth",
+            "1",
+            "rpf: the regularisation kernel's bandwidth h (0: off; docs/rpf.md)",
+            default=0.0,
+            ge=0,
+            lt=1,
+        ),
+    )
+
+    @classmethod
+    def build(
+        cls,
+        model: MotionModel,
+        x0_hat: Array,
+        P0: Array,
+        *,
+        particles: int,
+        rngs: Sequence[np.random.Generator] | None,
+        params: Mapping[str, float],
+    ) -> AuxiliaryParticleFilter:
+        assert rngs is not None, "a particle filter draws from one stream per run"
+        return cls(
+            model,
+            x0_hat,
+            P0,
+            particles,
+            rngs,
+            beta=params["rpf_beta"],
+            bandwidth=params["rpf_bandwidth"],
+        )
 
     def __init__(
         self,
@@ -84,12 +151,13 @@ class AuxiliaryParticleFilter:
         beta: float = BETA,
         bandwidth: float = 0.0,
         ess_min: float = ESS_MIN,
+        proposal: Proposal | None = None,
     ) -> None:
         """Draw N particles per run from N(x0_hat[:, b], P0), equally weighted."""
         if not 0.0 <= bandwidth < 1.0:
             raise ValueError(f"bandwidth must be in [0, 1), not {bandwidth}")
         self.model, self.rngs, self.N, self.beta = model, list(rngs), n_particles, beta
-        self.bandwidth, self.ess_min = bandwidth, ess_min
+        self.bandwidth, self.ess_min, self.proposal = bandwidth, ess_min, proposal
         self._kernel_rngs = [g.spawn(1)[0] for g in self.rngs] if bandwidth > 0 else []
         #: how many times each run was regularised
         self.regularised = np.zeros(len(self.rngs), dtype=np.int64)
@@ -130,6 +198,15 @@ class AuxiliaryParticleFilter:
         """The two stages on every statement of the step (eqs. in the module docstring)."""
         if not self._pending:
             raise RuntimeError("update() needs predict() first")
+        if self.proposal is not None:
+            if self._reset:
+                raise RuntimeError("a Proposal takes no lost-track recovery: run without it")
+            d = self.proposal.draw(self, observations)
+            ll = np.empty(self._logw.shape)
+            self._likelihood.into(d.x, observations, ll)
+            ll += d.log_prior_over_proposal
+            self._second_stage(d.x, ll, d.look_ahead, d.ancestors, d.beta, d.ok)
+            return
         x_prev, (B, N) = self._x, self._logw.shape
         la = self._look_ahead(self.anchors, observations)
         u = np.array([g.random() for g in self.rngs])
@@ -191,6 +268,32 @@ class AuxiliaryParticleFilter:
             self._propagate.mean(x_prev, m)
             return m
         return np.ascontiguousarray(self.model.f(x_prev))
+
+    def first_stage(
+        self, look_ahead: Array, beta: float
+    ) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+        """Ancestors (B, N + 1) by systematic resampling on w_{k-1} l^beta, drawing the step's
+        offset, and which runs succeeded (a run whose weights are not finite keeps its own)."""
+        B, N = self._logw.shape
+        u = np.array([g.random() for g in self.rngs])
+        ok, ess = np.empty(B, dtype=np.bool_), np.empty(B)
+        auxiliary.first_stage(self._logw, look_ahead, beta, u, self._anc, np.empty(N), ok, ess)
+        return np.where(ok[:, None], self._anc, self._identity), ok
+
+    def look_ahead(self, m: Array, observations: Sequence[Observation]) -> Array:
+        """log l_k(m_i): the step's likelihood at points ``m`` (n_x, B, N)."""
+        return self._look_ahead(m, observations)
+
+    def propagated(self, ancestors: NDArray[np.int64]) -> Array:
+        """f(x_{k-1}^{a_i}) + L v_i with this step's noise v: the prior's draw (a new array)."""
+        return self._propagated(ancestors, self._x)
+
+    @property
+    def log_weights(self) -> Array:
+        """log w_{k-1} (B, N) before an update, log w_k after, normalised. Read-only."""
+        view = self._logw.view()
+        view.flags.writeable = False
+        return view
 
     def _look_ahead(self, m: Array, observations: Sequence[Observation]) -> Array:
         """log l_k(m_i), the first stage's look-ahead."""

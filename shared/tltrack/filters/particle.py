@@ -26,11 +26,13 @@ the next ``predict``: the estimate was computed from it; assign a new array to r
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import gaussians, moments, propagation, resample
@@ -62,6 +64,24 @@ class ParticleFilter:
     ``predict`` propagates through the ancestors directly, and the estimate's moments come from the
     offspring counts, so the resampled cloud is never written out unless :attr:`x` is read.
     """
+
+    kind: ClassVar[str] = "pf"
+    particle: ClassVar[bool] = True
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+
+    @classmethod
+    def build(
+        cls,
+        model: MotionModel,
+        x0_hat: Array,
+        P0: Array,
+        *,
+        particles: int,
+        rngs: Sequence[np.random.Generator] | None,
+        params: Mapping[str, float],
+    ) -> ParticleFilter:
+        assert rngs is not None, "a particle filter draws from one stream per run"
+        return cls(model, x0_hat, P0, particles, rngs)
 
     def __init__(
         self,

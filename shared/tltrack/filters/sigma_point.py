@@ -17,13 +17,16 @@ counts the repairs per run.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import abc
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from itertools import combinations
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.filters.base import Estimate
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
@@ -233,3 +236,65 @@ class SigmaPointFilter:
         cov, repaired = _make_pd(_wcov(dZ, dZ, w) + R)
         self.repairs += repaired
         return Observation(sensor, eta, cov)
+
+
+#: the UKF's scaling parameter: the centre's weight is kappa / (n + kappa)
+KAPPA = Parameter("kappa", "1", "UKF scaling parameter (Julier & Uhlmann 2000)", default=2.0)
+
+
+class _RuleKind(SigmaPointFilter, abc.ABC):
+    """A filter kind (:mod:`tltrack.filters.kinds`) whose rule depends only on n and its declared
+    parameters."""
+
+    kind: ClassVar[str]
+    particle: ClassVar[bool] = False
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
+
+    @staticmethod
+    @abc.abstractmethod
+    def rule_for(n: int, params: Mapping[str, float]) -> SigmaRule:
+        """The sigma points for a state of dimension n."""
+
+    @classmethod
+    def build(
+        cls,
+        model: MotionModel,
+        x0_hat: Array,
+        P0: Array,
+        *,
+        particles: int,
+        rngs: Sequence[np.random.Generator] | None,
+        params: Mapping[str, float],
+    ) -> SigmaPointFilter:
+        return cls(model, cls.rule_for(model.n, params), x0_hat, P0)
+
+
+class UnscentedKalmanFilter(_RuleKind):
+    """``ukf``: the unscented rule, 2n + 1 points."""
+
+    kind = "ukf"
+    parameters = (KAPPA,)
+
+    @staticmethod
+    def rule_for(n: int, params: Mapping[str, float]) -> SigmaRule:
+        return unscented(n, params["kappa"])
+
+
+class CubatureKalmanFilter3(_RuleKind):
+    """``ckf3``: the 3rd-degree spherical-radial cubature rule, 2n points."""
+
+    kind = "ckf3"
+
+    @staticmethod
+    def rule_for(n: int, params: Mapping[str, float]) -> SigmaRule:
+        return cubature3(n)
+
+
+class CubatureKalmanFilter5(_RuleKind):
+    """``ckf5``: the 5th-degree cubature rule, 2n^2 + 1 points."""
+
+    kind = "ckf5"
+
+    @staticmethod
+    def rule_for(n: int, params: Mapping[str, float]) -> SigmaRule:
+        return cubature5(n)

@@ -13,8 +13,10 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
 from tltrack.models.gaussian_sensor import GaussianSensor
+from tltrack.models.range_bearing import SIGMA_BEARING
 
 Array = NDArray[np.float64]
 
@@ -26,6 +28,7 @@ class Bearing(GaussianSensor):
     kind: ClassVar[str] = "bearing"
     components: ClassVar[tuple[str, ...]] = ("bearing_rad",)
     angular: ClassVar[tuple[bool, ...]] = (True,)
+    parameters: ClassVar[tuple[Parameter, ...]] = (SIGMA_BEARING,)
 
     sigma_bearing: float
     layout: Layout

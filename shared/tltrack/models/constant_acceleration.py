@@ -18,7 +18,9 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
+from tltrack.models.process_noise import Q1
 
 Array = NDArray[np.float64]
 
@@ -31,6 +33,26 @@ def dwpa_sqrt(T: float, q: float) -> Array:
 @dataclass(frozen=True)
 class ConstantAcceleration:
     """Constant acceleration per axis, whose increment per period has variance q (m^2/s^4)."""
+
+    kind: ClassVar[str] = "ca"
+    components: ClassVar[tuple[str, ...]] = (
+        "x_m",
+        "vx_mps",
+        "ax_mps2",
+        "y_m",
+        "vy_mps",
+        "ay_mps2",
+    )
+    parameters: ClassVar[tuple[Parameter, ...]] = (Q1,)
+    #: a slow target (a boat, a drone) starting where Scenario 2 does at 30 m/s with a 0.5 m/s^2
+    #: lateral acceleration, so that it stays within about 5 km of the sensors over 100 steps;
+    #: q1, the variance of the acceleration's increment per step: it wanders by about 0.1 m/s^2
+    defaults: ClassVar[dict[str, object]] = {
+        "x0": [1000.0, 30.0, 0.0, 1000.0, 0.0, 0.5],
+        "P0_diag": [100.0, 10.0, 0.1, 100.0, 10.0, 0.1],
+        "q1": 0.01,
+        "q2": 0.0,
+    }
 
     T: float
     q: float
@@ -51,6 +73,10 @@ class ConstantAcceleration:
         object.__setattr__(self, "A", A)
         object.__setattr__(self, "Q_sqrt", L)
         object.__setattr__(self, "Q", L @ L.T)
+
+    @classmethod
+    def build(cls, T: float, params: dict[str, float]) -> ConstantAcceleration:
+        return cls(T=T, q=params["q1"])
 
     def f(self, x: Array) -> Array:
         return np.tensordot(self.A, x, axes=1)

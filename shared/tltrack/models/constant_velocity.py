@@ -8,8 +8,9 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
-from tltrack.models.process_noise import wna_sqrt
+from tltrack.models.process_noise import Q1, wna_sqrt
 
 Array = NDArray[np.float64]
 
@@ -17,6 +18,17 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class ConstantVelocity:
     """The seed's linear motion model, with white-noise acceleration of intensity q per axis."""
+
+    kind: ClassVar[str] = "cv"
+    components: ClassVar[tuple[str, ...]] = ("x_m", "vx_mps", "y_m", "vy_mps")
+    parameters: ClassVar[tuple[Parameter, ...]] = (Q1,)
+    #: Scenario 1 as the seed prints it (Table 1)
+    defaults: ClassVar[dict[str, object]] = {
+        "x0": [100.0, 10.0, 100.0, 10.0],
+        "P0_diag": [50.0, 1.0, 50.0, 1.0],
+        "q1": 0.1,
+        "q2": 0.0,
+    }
 
     T: float
     q: float
@@ -36,6 +48,10 @@ class ConstantVelocity:
         object.__setattr__(self, "A", A)
         object.__setattr__(self, "Q_sqrt", L)
         object.__setattr__(self, "Q", L @ L.T)
+
+    @classmethod
+    def build(cls, T: float, params: dict[str, float]) -> ConstantVelocity:
+        return cls(T=T, q=params["q1"])
 
     def f(self, x: Array) -> Array:
         return np.tensordot(self.A, x, axes=1)

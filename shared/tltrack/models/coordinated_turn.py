@@ -11,15 +11,29 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
-from tltrack.models.process_noise import wna_sqrt
+from tltrack.models.process_noise import Q1, Q2, wna_sqrt
 
 Array = NDArray[np.float64]
+
+_DEG = np.pi / 180.0
 
 
 @dataclass(frozen=True)
 class CoordinatedTurn:
     """The coordinated-turn model with unknown turn rate Omega, as the seed writes it."""
+
+    kind: ClassVar[str] = "ct"
+    components: ClassVar[tuple[str, ...]] = ("x_m", "vx_mps", "y_m", "vy_mps", "omega_radps")
+    parameters: ClassVar[tuple[Parameter, ...]] = (Q1, Q2)
+    #: Scenario 2 as the seed prints it (Table 1): start, P0's diagonal and noise
+    defaults: ClassVar[dict[str, object]] = {
+        "x0": [1000.0, 300.0, 1000.0, 0.0, -3.0 * _DEG],
+        "P0_diag": [100.0, 10.0, 100.0, 10.0, 100e-3],
+        "q1": 0.1,
+        "q2": 1.75e-2,
+    }
 
     T: float
     q1: float
@@ -39,6 +53,10 @@ class CoordinatedTurn:
         L[4, 2] = np.sqrt(self.q2 * self.T)
         object.__setattr__(self, "Q_sqrt", L)
         object.__setattr__(self, "Q", L @ L.T)
+
+    @classmethod
+    def build(cls, T: float, params: dict[str, float]) -> CoordinatedTurn:
+        return cls(T=T, q1=params["q1"], q2=params["q2"])
 
     def _ratios(self, w: Array) -> tuple[Array, Array, Array, Array]:
         """sin(wT)/w, (1 - cos(wT))/w, cos(wT), sin(wT), stable as w -> 0."""

@@ -1,8 +1,8 @@
 """What every sensor with additive Gaussian noise shares, given which components are angles.
 
 A concrete sensor subclasses :class:`GaussianSensor` and supplies ``h``, ``H`` and ``R`` (and its
-``kind``, ``components`` and ``angular`` declarations); residuals, sample means and noisy draws
-follow from those.
+``kind``, ``components``, ``angular`` and ``parameters`` declarations); residuals, sample means,
+noisy draws and its construction from a config follow from those.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.angles import circular_mean, wrap_angle
 from tltrack.models.base import Layout
 
@@ -30,9 +31,18 @@ class GaussianSensor(abc.ABC):
     components: ClassVar[tuple[str, ...]]
     #: which components are angles (wrapped, circular means)
     angular: ClassVar[tuple[bool, ...]]
+    #: its noise parameters: the fields a config or a transfer gives beside ``kind``
+    parameters: ClassVar[tuple[Parameter, ...]] = ()
 
     position: tuple[float, float]
     layout: Layout
+
+    @classmethod
+    def build(
+        cls, params: dict[str, float], layout: Layout, position: tuple[float, float]
+    ) -> GaussianSensor:
+        """The sensor of these parameter values, reading states of ``layout``, at ``position``."""
+        return cls(layout=layout, position=position, **params)  # type: ignore[call-arg]
 
     @property
     def n_z(self) -> int:

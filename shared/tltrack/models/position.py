@@ -13,6 +13,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
 from tltrack.models.gaussian_sensor import GaussianSensor
 
@@ -30,6 +31,9 @@ class Position(GaussianSensor):
     kind: ClassVar[str] = "position"
     components: ClassVar[tuple[str, ...]] = ("x_m", "y_m")
     angular: ClassVar[tuple[bool, ...]] = (False, False)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("sigma_pos", "m", "noise std per axis at I_w = 1", default=10.0, gt=0),
+    )
 
     layout: Layout
     position: tuple[float, float] = (0.0, 0.0)

@@ -11,7 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
+
 Array = NDArray[np.float64]
+
+#: the seed's two noise intensities (Table 1); each motion model declares those it reads
+Q1 = Parameter("q1", "m^2/s^4", "acceleration noise: its variance per axis", ge=0)
+Q2 = Parameter("q2", "rad^2/s^3", "turn-rate noise: Q_v's turn-rate entry is q2 T", ge=0)
 
 
 def wna_sqrt(T: float, q: float) -> Array:

@@ -12,12 +12,19 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
 from tltrack.models.gaussian_sensor import GaussianSensor
 
 Array = NDArray[np.float64]
 
 BEARING = 1  #: index of the bearing in z = [r, bearing]
+
+#: the seed's radar noise (Table 1); by default the config's top-level fields of these names
+SIGMA_R = Parameter("sigma_r", "m", "range noise std at I_w = 1", gt=0, inherit=True)
+SIGMA_BEARING = Parameter(
+    "sigma_bearing", "rad", "bearing noise std at I_w = 1", gt=0, inherit=True
+)
 
 
 @dataclass(frozen=True)
@@ -27,6 +34,7 @@ class RangeBearing(GaussianSensor):
     kind: ClassVar[str] = "range-bearing"
     components: ClassVar[tuple[str, ...]] = ("range_m", "bearing_rad")
     angular: ClassVar[tuple[bool, ...]] = (False, True)
+    parameters: ClassVar[tuple[Parameter, ...]] = (SIGMA_R, SIGMA_BEARING)
 
     sigma_r: float
     sigma_bearing: float

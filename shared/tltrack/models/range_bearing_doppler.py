@@ -15,9 +15,10 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.declare import Parameter
 from tltrack.models.base import Layout
 from tltrack.models.gaussian_sensor import GaussianSensor
-from tltrack.models.range_bearing import RangeBearing
+from tltrack.models.range_bearing import SIGMA_BEARING, SIGMA_R, RangeBearing
 
 Array = NDArray[np.float64]
 
@@ -33,6 +34,11 @@ class RangeBearingDoppler(GaussianSensor):
     kind: ClassVar[str] = "range-bearing-doppler"
     components: ClassVar[tuple[str, ...]] = ("range_m", "bearing_rad", "range_rate_mps")
     angular: ClassVar[tuple[bool, ...]] = (False, True, False)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        SIGMA_R,
+        SIGMA_BEARING,
+        Parameter("sigma_rr", "m/s", "range-rate noise std at I_w = 1", default=1.0, gt=0),
+    )
 
     sigma_r: float
     sigma_bearing: float

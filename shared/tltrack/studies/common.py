@@ -21,10 +21,9 @@ from numpy.typing import NDArray
 
 from tltrack.config import Config
 from tltrack.engine.montecarlo import FilterResult, run_sweep
-from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.truth_file import experiment_config
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 Results = dict[str, FilterResult]
 
@@ -76,9 +75,9 @@ def row(cells: Sequence[Any]) -> str:
 
 def bound(cfg: Config, with_sources: bool = True) -> NDArray[np.float64]:
     """The PCRLB of the primary (and every source's data) along run 0's truth, per k."""
-    ids = [PRIMARY, *(s.id for s in cfg.sources)] if with_sources else [PRIMARY]
-    pairs = [(sensor(cfg, i), sensor(cfg, i).R(intensity(cfg, i))) for i in ids]
-    return pcrlb(motion_model(cfg), pairs, truth(cfg, 0)[None], np.diag(cfg.P0_diag))
+    setup = Setup(cfg)
+    ids = setup.sensor_ids if with_sources else [PRIMARY]
+    return setup.pcrlb(ids, truth(setup, 0)[None])
 
 
 def plain(r: Results) -> dict[str, Any]:

@@ -9,14 +9,14 @@ from typing import Any
 import numpy as np
 
 from tltrack import plots
-from tltrack.config import PARTICLE_KINDS
+from tltrack.filters.kinds import FILTERS
 from tltrack.studies.common import Runner, Setting, bound, paired, plain, row, write
 
 
 def sources(setting: Setting, runner: Runner, out: Path) -> Path:
     """The primary's RMSE against the number of sources, honest or with one biased among them."""
     iso, tl, rob = (setting.name(r) for r in ("", "tl-", "robust-tl-"))
-    fusion = [setting.name("fusion-")] if setting.kind in PARTICLE_KINDS else []
+    fusion = [setting.name("fusion-")] if FILTERS.get(setting.kind).particle else []
     filters = [iso, tl, rob, *fusion]
     setups: dict[str, list[dict[str, Any]]] = {
         f"{n} honest": [{"id": f"s{i + 1}"} for i in range(n)] for n in (1, 2, 4)

@@ -1,0 +1,387 @@
+"""The step driver: one place that steps the sources, carries their transfers, and steps the
+primaries, for a batch of B runs.
+
+Every user of the roles of :mod:`tltrack.filters.transfer` goes through here: the Monte-Carlo
+engine (a batch of runs, :class:`Driver`), the live trackers (a batch of one; the source
+operator's process holds :class:`Sources`, the primary's :class:`Primaries`), the benchmarks,
+the examples and the studies' scripts. One step k:
+
+1. each source filter (Algorithm 1) updates on its z_k and predicts; its transfer
+   (eta_hat_{k+1}, P_eta_eta,k+1) goes into the :class:`Channel`;
+2. each primary filter (Algorithm 2) takes its z_k and, by its role, the transfers the channel
+   delivers for k (``tl-``, ``robust-tl-``), every source's raw z_k (``fusion-``) or nothing;
+   a robust primary first judges the transfers (:class:`~tltrack.filters.decision.TransferPolicy`)
+   and can roll back to its isolated twin.
+
+After every filter's step the driver hands a :class:`StepRecord` to each collector (as the
+``collect`` of ``particles``): scores, timings, diagnostics such as the effective sample size,
+with no reach into a filter's private state.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.engine.registry import FilterSpec, Role, build, parse, recovery, source_name
+from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.engine.streams import stream
+from tltrack.filters.base import Estimate, Filter
+from tltrack.filters.decision import TransferPolicy
+from tltrack.filters.transfer import Primary, Source
+from tltrack.models.observation import Observation
+
+Array = NDArray[np.float64]
+#: a transfer's path: (the source filter's name, the source operator's id)
+Link = tuple[str, str]
+
+
+# ---- what a step tells ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One filter's step k: its estimate, what it used or made, and its wall time."""
+
+    k: int
+    name: str  #: as reported (``source-pf/s2`` when there are several sources)
+    role: Role
+    filter: Filter
+    estimate: Estimate
+    seconds: float
+    used: NDArray[np.bool_] | None = None  #: a primary's runs whose update used a transfer
+    transfer: Observation | None = None  #: a source's (eta_hat, P_eta_eta) for k + 1
+
+
+class Collector(Protocol):
+    """Hears of every filter's step."""
+
+    def __call__(self, record: StepRecord) -> None: ...
+
+
+def _tell(collectors: Sequence[Collector], record: StepRecord) -> None:
+    for c in collectors:
+        c(record)
+
+
+def effective_sample_size(filt: Filter) -> Array | None:
+    """1 / sum w_i^2 per run, (B,), of a filter that keeps weights (``log_weights``); else None."""
+    logw = getattr(filt, "log_weights", None)
+    if logw is None:
+        return None
+    w = np.exp(logw - logw.max(axis=1, keepdims=True))
+    w /= w.sum(axis=1, keepdims=True)
+    return np.asarray(1.0 / (w * w).sum(axis=1))
+
+
+# ---- the channel ------------------------------------------------------------------------------
+
+
+class Channel(Protocol):
+    """Carries each transfer from its source filter to the primaries."""
+
+    def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
+        """The transfer made for step ``k_apply``."""
+
+    def receive(self, link: Link, k: int) -> Observation | None:
+        """What a primary on ``link`` takes at step k (None: nothing arrived). Reading twice
+        gives the same answer: several primaries may listen to one source."""
+
+
+class Direct:
+    """The identity: the transfer made for k is taken at k. ``lag`` (per source id) delays a
+    source's transfers by whole steps while they still claim to be current: a stale source
+    (:mod:`tltrack.engine.faults`)."""
+
+    def __init__(self, lag: Mapping[str, int] | None = None) -> None:
+        self.lag = dict(lag or {})
+        self._made: dict[Link, dict[int, Observation]] = {}
+
+    def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
+        made = self._made.setdefault(link, {})
+        made[k_apply] = transfer
+        made.pop(k_apply - self.lag.get(link[1], 0) - 2, None)
+
+    def receive(self, link: Link, k: int) -> Observation | None:
+        return self._made.get(link, {}).get(k - self.lag.get(link[1], 0))
+
+
+class Lossy:
+    """A link that loses, delays and reorders transfers, per run and seeded.
+
+    Each run's transfer is lost with probability ``drop``, else arrives ``delay`` steps late
+    plus a uniform jitter of 0..``jitter`` steps, so a later transfer may overtake an earlier
+    one. At step k each run takes the newest transfer (by the step it was made for) that has
+    arrived and that it has not taken before, as if it were current; an older one that arrives
+    after a newer one is discarded. The draws come from the stream (``seed``, run,
+    ``channel/<source id>``). With no loss, delay or jitter it is :class:`Direct`.
+    """
+
+    def __init__(
+        self, runs: Sequence[int], seed: int, drop: float = 0.0, delay: int = 0, jitter: int = 0
+    ) -> None:
+        if not 0.0 <= drop <= 1.0 or delay < 0 or jitter < 0:
+            raise ValueError("drop must be in [0, 1], delay and jitter >= 0")
+        self.runs, self.seed = list(runs), seed
+        self.drop, self.delay, self.jitter = drop, delay, jitter
+        self._rngs: dict[Link, list[np.random.Generator]] = {}
+        #: per link: (k_apply, arrival step per run (-1: lost), the transfer)
+        self._sent: dict[Link, list[tuple[int, NDArray[np.int64], Observation]]] = {}
+        self._taken: dict[Link, NDArray[np.int64]] = {}  #: per run, the newest k_apply taken
+        self._answers: dict[tuple[Link, int], Observation | None] = {}
+
+    def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
+        rngs = self._rngs.setdefault(
+            link, [stream(self.seed, r, f"channel/{link[1]}") for r in self.runs]
+        )
+        lost = np.array([g.random() < self.drop for g in rngs])
+        late = np.array([self.delay + int(g.integers(0, self.jitter + 1)) for g in rngs])
+        arrival = np.where(lost, -1, k_apply + late)
+        self._sent.setdefault(link, []).append((k_apply, arrival, transfer))
+
+    def receive(self, link: Link, k: int) -> Observation | None:
+        if (link, k) in self._answers:
+            return self._answers[link, k]
+        B = len(self.runs)
+        taken = self._taken.setdefault(link, np.zeros(B, dtype=np.int64))
+        best, best_k = np.full(B, -1), np.zeros(B, dtype=np.int64)
+        sent = self._sent.get(link, [])
+        for i, (k_apply, arrival, _t) in enumerate(sent):
+            newer = (arrival >= 0) & (arrival <= k) & (k_apply > np.maximum(taken, best_k))
+            best, best_k = np.where(newer, i, best), np.where(newer, k_apply, best_k)
+        answer = None
+        if (best >= 0).any():
+            first = sent[int(best[best >= 0][0])][2]
+            mean, cov = first.mean.copy(), np.array(first.cov)
+            for b in np.flatnonzero(best >= 0):
+                k_apply, _arrival, t = sent[best[b]]
+                mean[:, b], cov[b] = t.mean[:, b], t.cov[b]
+                taken[b] = k_apply
+            answer = Observation(first.sensor, mean, cov, best >= 0, first.origin)
+        self._sent[link] = [s for s in sent if ((s[1] >= 0) & (s[0] > taken)).any()]
+        self._answers = {key: v for key, v in self._answers.items() if key[1] >= k}
+        self._answers[link, k] = answer
+        return answer
+
+
+# ---- the two halves ---------------------------------------------------------------------------
+
+
+def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
+    """``source-pf`` for the paper's single source; ``source-pf/<id>`` when there are several."""
+    return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
+
+
+class Sources:
+    """Algorithm 1 for each (source filter, source id) of ``links``: a source operator's half."""
+
+    def __init__(
+        self,
+        setup: Setup,
+        links: Sequence[Link],
+        x0_hat: Array,
+        runs: Sequence[int],
+        collectors: Sequence[Collector] = (),
+    ) -> None:
+        self.setup, self.collectors = setup, collectors
+        self.roles: dict[Link, Source] = {}
+        self.names: dict[Link, str] = {}
+        n = len(setup.source_ids)
+        for name, sid in links:
+            spec = parse(name)
+            own = setup.sensors[sid]
+            filt = build(spec, setup, x0_hat, runs, source_id=sid)
+            self.roles[name, sid] = Source(filt, own.model, own.R, recovery(spec, setup.cfg))
+            self.names[name, sid] = reported_name(spec, sid, n)
+
+    def step(
+        self, k: int, z: Mapping[str, Observation | None], only: Iterable[Link] | None = None
+    ) -> dict[Link, Observation]:
+        """Step the source filters (those of ``only``, default all) on their operator's
+        ``z[sid]`` (None: it never came; predict through it); returns each one's transfer for
+        k + 1, named by its source."""
+        out = {}
+        for name, sid in self.roles if only is None else only:
+            role = self.roles[name, sid]
+            t0 = time.perf_counter()
+            est, transfer = role.step(z[sid])
+            dt = time.perf_counter() - t0
+            transfer = replace(transfer, origin=sid)
+            out[name, sid] = transfer
+            name_ = self.names[name, sid]
+            _tell(
+                self.collectors,
+                StepRecord(k, name_, "source", role.filter, est, dt, transfer=transfer),
+            )
+        return out
+
+    def recovered(self, link: Link) -> bool:
+        """Did the last step reinitialise this source filter in any run?"""
+        return _any(self.roles[link].recovered)
+
+
+#: a primary's statements besides its own z_k, by its role
+Feed = Callable[[FilterSpec], list[Observation]]
+
+
+class Primaries:
+    """Algorithm 2 for each primary filter of ``specs``: the primary operator's half.
+
+    A robust primary steps an isolated twin of its kind, on the same random numbers, that it
+    judges transfers against and rolls back to. With ``share_twins`` that twin *is* the isolated
+    primary of its kind when ``specs`` has one (as the live primary reports its twin), so it is
+    stepped once; otherwise each robust primary has its own (the engine times each filter apart).
+    """
+
+    def __init__(
+        self,
+        setup: Setup,
+        specs: Sequence[FilterSpec],
+        x0_hat: Array,
+        runs: Sequence[int],
+        collectors: Sequence[Collector] = (),
+        *,
+        share_twins: bool = False,
+    ) -> None:
+        self.setup, self.collectors = setup, collectors
+        cfg = setup.cfg
+        self.roles: dict[str, tuple[FilterSpec, Primary]] = {}
+        self._twin_of: dict[str, str] = {}  #: isolated name -> the robust primary stepping it
+        for spec in sorted(specs, key=lambda s: s.role == "robust"):  # isolated ones first
+            filt = build(spec, setup, x0_hat, runs)
+            policy = twin = None
+            if spec.role == "robust":
+                policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
+                shared = self.roles.get(spec.kind) if share_twins else None
+                if shared is not None and spec.kind not in self._twin_of:
+                    twin = shared[1]
+                    self._twin_of[spec.kind] = spec.name
+                else:
+                    iso = parse(spec.kind)
+                    twin = Primary(build(iso, setup, x0_hat, runs), None, recovery(iso, cfg))
+            role = Primary(filt, policy, recovery(spec, cfg), twin)
+            self.roles[spec.name] = (spec, role)
+        self.roles = {s.name: self.roles[s.name] for s in specs}  # in the order asked for
+
+    def step(
+        self, k: int, z: Observation | None, feed: Feed, only: Iterable[str] | None = None
+    ) -> dict[str, Estimate]:
+        """Step the primaries (those named in ``only``, in their order; default all) on their
+        own ``z`` (None: it never came) and what ``feed`` gives each by its role.
+
+        A twin shared with a robust primary is not stepped again: its estimate is the one the
+        robust primary's step made, so step the robust one first.
+        """
+        out = {}
+        for name in self.roles if only is None else only:
+            spec, role = self.roles[name]
+            t0 = time.perf_counter()
+            if name in self._twin_of:
+                owner = self.roles[self._twin_of[name]][1]
+                est = owner.twin_estimate
+                if est is None:
+                    raise RuntimeError(f"{name} is {self._twin_of[name]}'s twin: step that first")
+                owner.twin_estimate = None
+            else:
+                est = role.step(z, feed(spec))
+            dt = time.perf_counter() - t0
+            used = None if name in self._twin_of else role.used
+            _tell(self.collectors, StepRecord(k, name, spec.role, role.filter, est, dt, used))
+            out[name] = est
+        return out
+
+    def robust(self, name: str) -> bool:
+        """Does primary ``name`` judge transfers (and step a twin inside its step)?"""
+        return self.roles[name][1].policy is not None
+
+    def used(self, name: str) -> bool:
+        """Did its last step use a transfer, in any run?"""
+        return _any(self.roles[name][1].used)
+
+    def recovered(self, name: str) -> bool:
+        """Did its last step reinitialise it (it had lost the track), in any run?"""
+        return _any(self.roles[name][1].recovered)
+
+    def rolled_back(self, name: str) -> bool:
+        """Did its last step roll it back to its isolated twin, in any run?"""
+        return _any(self.roles[name][1].rolled_back)
+
+
+def _any(runs: NDArray[np.bool_] | None) -> bool:
+    return runs is not None and bool(runs.any())
+
+
+# ---- both halves, for a batch of runs ---------------------------------------------------------
+
+
+def source_links(names: Sequence[str], setup: Setup) -> list[Link]:
+    """(source filter, source id) of every source filter to run: those the TL filters listen to,
+    and those asked for by name (for every source)."""
+    ids = setup.source_ids
+    pairs = []
+    for spec in (parse(n) for n in dict.fromkeys(names)):
+        if spec.role in ("tl", "robust"):
+            pairs += [(source_name(spec, setup.cfg, sid), sid) for sid in ids]
+    pairs += [
+        (spec.name, sid) for spec in map(parse, names) if spec.role == "source" for sid in ids
+    ]
+    return list(dict.fromkeys(pairs))
+
+
+def primary_specs(names: Sequence[str]) -> list[FilterSpec]:
+    """The primary filters among ``names`` (no source filter), each once."""
+    return [s for s in (parse(n) for n in dict.fromkeys(names)) if s.role != "source"]
+
+
+class Driver:
+    """Every filter of ``names`` (and the sources its TL filters need) over a batch of runs.
+
+    ``setups`` may add configurations that differ from the first only in the primary's sensor
+    noise (an intensity sweep): the sources step once and feed the primaries of each.
+    """
+
+    def __init__(
+        self,
+        setups: Sequence[Setup],
+        names: Sequence[str],
+        x0_hat: Array,
+        runs: Sequence[int],
+        *,
+        channel: Channel | None = None,
+        collectors: Sequence[Sequence[Collector]] = (),
+    ) -> None:
+        """``collectors[i]`` hear of setup i's filters (the sources' steps go to every one)."""
+        self.setups = list(setups)
+        base = self.setups[0]
+        hear = list(collectors) or [[] for _ in self.setups]
+        everyone = [c for cs in hear for c in cs]
+        self.channel: Channel = channel or Direct()
+        self.sources = Sources(base, source_links(names, base), x0_hat, runs, everyone)
+        specs = primary_specs(names)
+        self.primaries = [
+            Primaries(s, specs, x0_hat, runs, cs) for s, cs in zip(self.setups, hear, strict=True)
+        ]
+
+    def step(self, k: int, z: Sequence[Mapping[str, Observation | None]]) -> None:
+        """Step k: ``z[i]`` maps each sensor id of setup i to its z_k (the sources' are read from
+        the first)."""
+        for link, transfer in self.sources.step(k, z[0]).items():
+            self.channel.send(link, k + 1, transfer)
+        cfg = self.setups[0].cfg
+        ids = self.setups[0].source_ids
+
+        def feed(spec: FilterSpec) -> list[Observation]:
+            if spec.role in ("tl", "robust"):
+                got = (self.channel.receive((source_name(spec, cfg, i), i), k) for i in ids)
+                return [t for t in got if t is not None]
+            if spec.role == "fusion":
+                return [o for i in ids if (o := z[0][i]) is not None]
+            return []
+
+        for zi, half in zip(z, self.primaries, strict=True):
+            half.step(k, zi[PRIMARY], feed)

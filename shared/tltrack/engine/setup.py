@@ -1,0 +1,132 @@
+"""The models a :class:`~tltrack.config.Config` describes, built once: its :class:`Setup`.
+
+An experiment's batch, a live episode, a study or a test builds one :class:`Setup` from its
+config and reads the motion model and every operator's sensor (with its Q_w) from it, instead of
+rebuilding them from the config wherever they are needed.
+
+A sensor is described by a :class:`~tltrack.config.SensorSpec` (kind, position, parameters): in
+the config for each operator, and on the wire in every transfer, so that a primary can use a
+source's transfer without being configured for that source's sensor (:func:`from_spec`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property, lru_cache
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.config import Config, SensorSpec
+from tltrack.engine.pcrlb import pcrlb
+from tltrack.models.base import Layout, MeasurementModel, MotionModel
+from tltrack.models.kinds import MOTIONS, SENSORS
+from tltrack.models.observation import Observation
+
+Array = NDArray[np.float64]
+
+#: the primary operator's sensor id; a source's is its own id
+PRIMARY = "primary"
+
+
+def motion_model(cfg: Config) -> MotionModel:
+    """The scenario's motion model, with the noise parameters it declares."""
+    cls = MOTIONS.get(cfg.scenario)
+    return cls.build(cfg.Ts, {p.name: float(getattr(cfg, p.name)) for p in cls.parameters})
+
+
+def sensor_spec(cfg: Config, sensor_id: str = PRIMARY) -> SensorSpec:
+    """The full description of an operator's sensor: every parameter and its position filled in
+    (a parameter left out takes its default: an inherited one, the config's top-level field of
+    its name, as the flat ``sigma_r`` and ``sigma_bearing``)."""
+    if sensor_id == PRIMARY:
+        spec, position = cfg.primary_sensor, cfg.primary_position
+    else:
+        src = next(s for s in cfg.sources if s.id == sensor_id)
+        spec, position = src.sensor, src.position
+    spec = spec or SensorSpec.model_validate({})
+    given = spec.params
+    params = {}
+    for p in spec.declared:
+        value = given.get(p.name) or (getattr(cfg, p.name) if p.inherit else p.default)
+        if value is None:
+            raise ValueError(f"{sensor_id}: a {spec.kind} sensor needs {p.name} [{p.unit}]")
+        params[p.name] = float(value)
+    at = spec.position or position or (0.0, 0.0)
+    return SensorSpec(kind=spec.kind, position=at, **params)
+
+
+@lru_cache(maxsize=64)
+def from_spec(spec: SensorSpec, layout: Layout) -> MeasurementModel:
+    """The sensor a full :func:`sensor_spec` describes, reading states of ``layout``."""
+    return SENSORS.get(spec.kind).build(spec.params, layout, spec.position or (0.0, 0.0))
+
+
+def intensity(cfg: Config, sensor_id: str = PRIMARY) -> float:
+    """The noise intensity I_w of the primary, or of the source with id ``sensor_id``."""
+    if sensor_id == PRIMARY:
+        return cfg.primary_intensity
+    return next(s.intensity for s in cfg.sources if s.id == sensor_id)
+
+
+@dataclass(frozen=True)
+class OwnSensor:
+    """An operator's sensor, its full description and its Q_w: what turns its z into an
+    :class:`~tltrack.models.observation.Observation`."""
+
+    model: MeasurementModel
+    spec: SensorSpec
+    R: Array
+
+    def observe(self, z: Array) -> Observation:
+        """z_k (n_z,) or a batch's (n_z, B) with the sensor's own Q_w."""
+        return Observation.broadcast(self.model, z, self.R)
+
+
+@dataclass(frozen=True)
+class Setup:
+    """A config's motion model and each operator's sensor, built once."""
+
+    cfg: Config
+
+    @cached_property
+    def motion(self) -> MotionModel:
+        return motion_model(self.cfg)
+
+    @property
+    def layout(self) -> Layout:
+        return self.motion.layout
+
+    @property
+    def source_ids(self) -> list[str]:
+        return [s.id for s in self.cfg.sources]
+
+    @property
+    def sensor_ids(self) -> list[str]:
+        """The primary's, then every source's."""
+        return [PRIMARY, *self.source_ids]
+
+    @cached_property
+    def sensors(self) -> dict[str, OwnSensor]:
+        out = {}
+        for sid in self.sensor_ids:
+            spec = sensor_spec(self.cfg, sid)
+            model = from_spec(spec, self.layout)
+            out[sid] = OwnSensor(model, spec, model.R(intensity(self.cfg, sid)))
+        return out
+
+    def sensor(self, sensor_id: str = PRIMARY) -> MeasurementModel:
+        return self.sensors[sensor_id].model
+
+    def intensity(self, sensor_id: str = PRIMARY) -> float:
+        return intensity(self.cfg, sensor_id)
+
+    @cached_property
+    def P0(self) -> Array:
+        return np.diag(self.cfg.P0_diag)
+
+    def pcrlb(self, sensor_ids: list[str], truths: Array) -> Array:
+        """The position PCRLB per k of a filter given ``sensor_ids``' measurements, averaged over
+        the true trajectories ``truths`` (R, K + 1, n_x) (:mod:`tltrack.engine.pcrlb`)."""
+        pairs = [(self.sensor(i), self.sensors[i].R) for i in sensor_ids]
+        return pcrlb(self.motion, pairs, truths, self.P0)
