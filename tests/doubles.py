@@ -3,8 +3,9 @@ a service that is never opened, to drive a service's handlers in-process, and th
 announcements those handlers need.
 
 :class:`PositionSensor` is a whole new sensor written against the
-:class:`~tltrack.models.base.MeasurementModel` Protocol, outside the package: that it runs through
-every filter kind and role (tests/test_model_interface.py) is what proves the interface.
+:class:`~tltrack.models.base.MeasurementModel` Protocol, outside the package, and named in a
+config by its import path (``doubles:PositionSensor``): that it runs through every filter kind
+and role (tests/test_model_interface.py) is what proves the interface.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import zenoh
 from livestack import SIM_DEFAULTS
 from tltrack import keys
 from tltrack.config import make_config
+from tltrack.declare import Parameter
 from tltrack.messages import EpisodeEnd, EpisodeStart, Message, encode
 from tltrack.models.base import Layout
 from tltrack.models.constant_velocity import ConstantVelocity
@@ -38,6 +40,9 @@ class PositionSensor(GaussianSensor):
     kind: ClassVar[str] = "test-position"
     components: ClassVar[tuple[str, ...]] = ("x_m", "y_m")
     angular: ClassVar[tuple[bool, ...]] = (False, False)
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("sigma", "m", "noise std per axis at I_w = 1", default=5.0, gt=0),
+    )
 
     sigma: float = 5.0
     layout: Layout = CV_LAYOUT

@@ -9,8 +9,8 @@ from tltrack.config import make_config
 from tltrack.engine.faults import STALE_LAG
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.messages import Measurement, Transfer
-from tltrack.models.from_config import PRIMARY
 from tltrack.tracking import PrimaryEpisode, SourceEpisode
 
 CFG = make_config(preset="arasaratnam-haykin", truth="fixed", seed=3, K=25, particles=400)
@@ -18,7 +18,7 @@ CFG = make_config(preset="arasaratnam-haykin", truth="fixed", seed=3, K=25, part
 
 def _replay(shift: int) -> np.ndarray:
     """TL-PF estimates when the transfer from source step j is applied at step j + 1 - shift."""
-    run = simulate(CFG, 0)
+    run = simulate(Setup(CFG), 0)
     sid = CFG.source.id
     src, prim = SourceEpisode(CFG, 0, "pf", sid), PrimaryEpisode(CFG, 0, "pf")
     made: dict[int, Transfer] = {}
@@ -35,7 +35,7 @@ def _replay(shift: int) -> np.ndarray:
             k=k,
             t_sensor=0.0,
             k_apply=k + 1,
-            sensor=src.sensor_spec,
+            sensor=src.own.spec,
             eta=eta.mean[:, 0],
             P_eta=eta.cov[0],
         )
@@ -64,7 +64,7 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
         sources=[{"id": "s1", "fault": "stale"}, {"id": "s2"}],
     )
     lag = {"s1": STALE_LAG, "s2": 0}
-    run = simulate(cfg, 0)
+    run = simulate(Setup(cfg), 0)
     srcs = {s: SourceEpisode(cfg, 0, "pf", s) for s in lag}
     prim = PrimaryEpisode(cfg, 0, "pf", robust=True)
     made: dict[str, dict[int, Transfer]] = {s: {} for s in lag}
@@ -79,7 +79,7 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
                 k=k,
                 t_sensor=0.0,
                 k_apply=k + 1,
-                sensor=src.sensor_spec,
+                sensor=src.own.spec,
                 eta=eta.mean[:, 0],
                 P_eta=eta.cov[0],
             )

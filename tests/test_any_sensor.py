@@ -8,17 +8,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tltrack.config import SENSOR_NZ, make_config
+from tltrack.config import make_config
 from tltrack.engine.montecarlo import check_filters, run_batch
-from tltrack.engine.registry import KINDS
 from tltrack.engine.results import position_bounds
+from tltrack.engine.setup import Setup
 from tltrack.filters.decision import NotComparableError
+from tltrack.filters.kinds import FILTERS
 from tltrack.models.base import PositionFix
-from tltrack.models.from_config import sensor
+from tltrack.models.kinds import SENSORS
 
-SENSOR_KINDS = list(SENSOR_NZ)
+SENSOR_KINDS = SENSORS.names()
 #: every filter, robust transfer aside (it needs sensors that fix a position)
-FILTERS = [f"{role}{kind}" for kind in KINDS for role in ("", "tl-", "source-")] + ["fusion-pf"]
+NAMES = [f"{role}{kind}" for kind in FILTERS.names() for role in ("", "tl-", "source-")] + [
+    "fusion-pf"
+]
 
 
 def config(scenario: str, primary: str, source: str) -> object:
@@ -36,8 +39,8 @@ def config(scenario: str, primary: str, source: str) -> object:
 def test_every_filter_runs_for_a_pair_of_sensors_of_any_kind(scenario: str, primary: str) -> None:
     source = SENSOR_KINDS[(SENSOR_KINDS.index(primary) + 1) % len(SENSOR_KINDS)]
     cfg = config(scenario, primary, source)
-    names = list(FILTERS)
-    comparable = all(isinstance(sensor(cfg, i), PositionFix) for i in ("primary", "s1"))
+    names = list(NAMES)
+    comparable = all(isinstance(Setup(cfg).sensor(i), PositionFix) for i in ("primary", "s1"))
     if comparable:
         names.append("robust-tl-pf")
     stats = run_batch(cfg, names, [0, 1])

@@ -40,7 +40,7 @@ from tltrack import keys
 from tltrack.config import make_config
 from tltrack.demo import IDENTITY, passwords
 from tltrack.engine.scenario import measurements, truth
-from tltrack.models.from_config import motion_model
+from tltrack.engine.setup import Setup
 from tltrack.transport import Subscriber, ZenohSettings, open_session, query
 
 pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.timeout(900)]
@@ -601,12 +601,12 @@ def test_raw_data_never_leaves_its_owners_router_in_containers(
     raw: dict[str, set[bytes]] = {"primary": set(), "s1": set(), "truth": set()}
     for run, cfg_json in stack.sql("SELECT run, config FROM episodes WHERE episode LIKE 'main-%'"):
         cfg = make_config(json.loads(cfg_json))
-        x = truth(cfg, run)
+        x = truth(Setup(cfg), run)
         # the truth's positions: a noise-free truth keeps the turn rate of x0, which the
         # episode's config (allowed out) carries
-        raw["truth"] |= sentinels(motion_model(cfg).layout.position(x[1:].T))
+        raw["truth"] |= sentinels(Setup(cfg).motion.layout.position(x[1:].T))
         for sid in ("primary", "s1"):
-            raw[sid] |= sentinels(measurements(cfg, run, x, sid))
+            raw[sid] |= sentinels(measurements(Setup(cfg), run, x, sid))
     assert all(len(v) >= STEPS for v in raw.values()), {k: len(v) for k, v in raw.items()}
 
     def estimated(name: str) -> set[bytes]:

@@ -6,6 +6,7 @@ from tltrack.config import make_config
 from tltrack.engine import results
 from tltrack.engine.montecarlo import nees, run_experiment, run_sweep, trace_run
 from tltrack.engine.scenario import simulate, truth
+from tltrack.engine.setup import Setup
 from tltrack.filters.kernels.moments import spread_coordinates
 
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
@@ -37,7 +38,7 @@ def test_overall_rmse_is_the_papers_mean_of_per_step_rmse():
     sq = np.array(
         [
             [
-                np.sum((per_run[r][k, [0, 2]] - truth(cfg, r)[k + 1, [0, 2]]) ** 2)
+                np.sum((per_run[r][k, [0, 2]] - truth(Setup(cfg), r)[k + 1, [0, 2]]) ** 2)
                 for k in range(cfg.K)
             ]
             for r in range(cfg.runs)
@@ -50,11 +51,13 @@ def test_overall_rmse_is_the_papers_mean_of_per_step_rmse():
 @pytest.mark.parametrize("mode", ["fixed", "random", "noise-free"])
 def test_truth_modes(mode):
     cfg = _cfg(truth=mode)
-    a, b = truth(cfg, 0), truth(cfg, 1)
+    a, b = truth(Setup(cfg), 0), truth(Setup(cfg), 1)
     assert np.array_equal(a, b) == (mode != "random")
     if mode == "noise-free":
         assert a[:, 4].std() == 0.0  # the turn rate never changes
-    assert not np.array_equal(simulate(cfg, 0).z["primary"], simulate(cfg, 1).z["primary"])
+    assert not np.array_equal(
+        simulate(Setup(cfg), 0).z["primary"], simulate(Setup(cfg), 1).z["primary"]
+    )
 
 
 def test_transfer_helps_and_fusion_helps_more():

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-import re
+import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -14,11 +15,22 @@ pytestmark = pytest.mark.slow
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def test_a_user_defined_range_only_sensor_runs_tl_pf_through_the_public_api() -> None:
-    argv = [sys.executable, str(EXAMPLES / "range_only.py"), "--runs", "3", "--particles", "2000"]
-    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+def test_a_range_only_primary_from_its_own_file_is_helped_by_the_radars_transfer(
+    tmp_path: Path,
+) -> None:
+    """examples/range_only/primary.toml names the sensor's class by its import path."""
+    folder = EXAMPLES / "range_only"
+    env = {**os.environ, "PYTHONPATH": str(folder), "MPLBACKEND": "Agg"}
+    argv = [sys.executable, "-m", "tltrack", "experiment", "--config", str(folder / "primary.toml")]
+    argv += ["--filters", "pf,tl-pf", "--particles", "2000", "--runs", "3", "--workers", "1"]
+    done = subprocess.run(
+        [*argv, "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0, done.stderr
-    rmse = dict(re.findall(r"^\s*(\S+): overall RMSE\s+([\d.]+) m", done.stdout, re.M))
-    assert set(rmse) == {"pf", "tl-pf", "source-pf"}, done.stdout
+    doc = json.loads((tmp_path / "results.json").read_text())
+    rmse = {n: r["rmse_overall"] for n, r in doc["filters"].items()}
+    assert doc["config"]["primary_sensor"]["kind"] == "range-only"
     # a range alone leaves the cross-range direction to the prior: the radar's transfer fixes it
-    assert float(rmse["tl-pf"]) < 0.5 * float(rmse["pf"]), done.stdout
+    assert rmse["tl-pf"] < 0.5 * rmse["pf"], rmse
+    bound = doc["pcrlb"]
+    assert all(w <= p for w, p in zip(bound["with_source"], bound["primary"], strict=True))

@@ -20,6 +20,7 @@ from numba import njit
 from scipy import stats
 from tltrack.config import make_config
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import streams
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import fastmath as kernels
@@ -28,7 +29,6 @@ from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices, systematic_walk
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models import ConstantVelocity, CoordinatedTurn, Observation, RangeBearing
-from tltrack.models.from_config import PRIMARY, intensity, motion_model, sensor
 
 
 class SlowCT(CoordinatedTurn):
@@ -93,11 +93,11 @@ class ReferenceSIR:
 
 def _experiment(make_filter, cfg, runs):
     """Per-run RMSE (over k) of source-pf, pf and tl-pf; ``make_filter(purpose)`` builds one."""
-    sims = [simulate(cfg, r) for r in runs]
+    sims = [simulate(Setup(cfg), r) for r in runs]
     truth = np.stack([s.truth for s in sims], axis=1)  # (K + 1, B, n)
     sid = cfg.sources[0].id
-    sp, ss = sensor(cfg, PRIMARY), sensor(cfg, sid)
-    Rp, Rs = sp.R(intensity(cfg, PRIMARY)), ss.R(intensity(cfg, sid))
+    sp, ss = Setup(cfg).sensor(PRIMARY), Setup(cfg).sensor(sid)
+    Rp, Rs = sp.R(Setup(cfg).intensity(PRIMARY)), ss.R(Setup(cfg).intensity(sid))
     src = Source(make_filter("source"), ss, Rs)
     iso, tl = Primary(make_filter("pf")), Primary(make_filter("tl"))
     sq = {"source-pf": [], "pf": [], "tl-pf": []}
@@ -121,8 +121,8 @@ def _experiment(make_filter, cfg, runs):
 def test_fast_path_has_the_reference_rmse_within_monte_carlo_error():
     cfg = make_config(preset="arasaratnam-haykin", truth="noise-free", K=30, particles=1000)
     runs = list(range(24))
-    model = motion_model(cfg)
-    x0 = np.stack([simulate(cfg, r).x0_hat for r in runs], axis=1)
+    model = Setup(cfg).motion
+    x0 = np.stack([simulate(Setup(cfg), r).x0_hat for r in runs], axis=1)
     P0 = np.diag(cfg.P0_diag)
 
     def fast(purpose):
@@ -146,7 +146,7 @@ def test_fast_path_has_the_reference_rmse_within_monte_carlo_error():
 
 def _ct_pair(B=3, N=2001, seed=7):
     cfg = make_config(particles=N)
-    fast_model = motion_model(cfg)
+    fast_model = Setup(cfg).motion
     slow_model = SlowCT(T=cfg.Ts, q1=cfg.q1, q2=cfg.q2)
     x0 = np.repeat(np.asarray(cfg.x0)[:, None], B, 1)
     P0 = np.diag(cfg.P0_diag)
@@ -181,7 +181,7 @@ def test_cv_propagation_equals_the_generic_path():
 def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
     cfg, f, _ = _ct_pair()
     f.predict()
-    rb = sensor(cfg)
+    rb = Setup(cfg).sensor()
     slow = SlowRB(rb.sigma_r, rb.sigma_bearing, rb.layout, (150.0, -40.0))
     fast = RangeBearing(rb.sigma_r, rb.sigma_bearing, rb.layout, (150.0, -40.0))
     # bearings near the +-pi cut, a correlated covariance, and one run masked out
@@ -226,7 +226,9 @@ def test_range_bearing_likelihood_and_moments_equal_the_generic_path():
 def test_estimate_from_offspring_counts_is_the_resampled_clouds_moments():
     cfg, f, _ = _ct_pair()
     f.predict()
-    z = Observation.broadcast(sensor(cfg), np.array([1300.0, 0.75]), sensor(cfg).R(4.0))
+    z = Observation.broadcast(
+        Setup(cfg).sensor(), np.array([1300.0, 0.75]), Setup(cfg).sensor().R(4.0)
+    )
     f.update([z])
     est = f.estimate()  # by counts
     x = f.x  # gathered on request
@@ -242,7 +244,7 @@ def test_reading_x_changes_nothing():
     """x is gathered lazily after update; asking for it must not change any later number."""
     cfg, a, _ = _ct_pair(seed=11)
     _, b, _ = _ct_pair(seed=11)
-    s = sensor(cfg)
+    s = Setup(cfg).sensor()
     for k in range(4):
         z = Observation.broadcast(s, np.array([1300.0 + 300 * k, 0.75]), s.R(4.0))
         for f in (a, b):
@@ -271,10 +273,10 @@ def test_gaussians_are_standard_normal_and_independent():
 @pytest.mark.parametrize("N", [500, 501])
 def test_results_do_not_depend_on_the_batch_size(N):
     cfg = make_config(particles=N, K=6)
-    model = motion_model(cfg)
+    model = Setup(cfg).motion
     runs = list(range(7))
-    sims = [simulate(cfg, r) for r in runs]
-    s = sensor(cfg)
+    sims = [simulate(Setup(cfg), r) for r in runs]
+    s = Setup(cfg).sensor()
     R = s.R(4.0)
 
     def track(batch):
@@ -305,7 +307,7 @@ def test_results_do_not_depend_on_the_batch_size(N):
 def test_a_nan_run_is_lost_and_the_others_untouched():
     cfg, a, _ = _ct_pair(B=3, seed=4)
     _, b, _ = _ct_pair(B=3, seed=4)
-    s = sensor(cfg)
+    s = Setup(cfg).sensor()
     z = Observation.broadcast(s, np.array([1300.0, 0.75]), s.R(4.0))
     a.predict()
     b.predict()
@@ -321,7 +323,7 @@ def test_a_nan_run_is_lost_and_the_others_untouched():
 
 def test_two_sharp_range_bearing_likelihoods_never_give_nan():
     cfg, f, _ = _ct_pair()
-    s = sensor(cfg)
+    s = Setup(cfg).sensor()
     far = Observation.broadcast(s, np.array([9e4, -2.0]), np.diag([1e-6, 1e-10]))
     f.predict()
     f.update([far, far])
@@ -409,9 +411,9 @@ def test_elementary_functions_pass_nan_and_infinity_through():
 @pytest.mark.parametrize("N", [1, 2, 3, 257])
 def test_tiny_and_odd_clouds(N):
     cfg = make_config(particles=10)
-    s = sensor(cfg)
+    s = Setup(cfg).sensor()
     pf = ParticleFilter(
-        motion_model(cfg),
+        Setup(cfg).motion,
         np.asarray(cfg.x0)[:, None],
         np.diag(cfg.P0_diag),
         N,
@@ -429,7 +431,7 @@ def test_x_can_be_changed_after_predict_and_replaced_after_update():
     """A recovery redraws lost runs in place after predict; after update x is read-only (the
     estimate was computed from it) and a new cloud is assigned instead."""
     cfg, a, _ = _ct_pair(seed=8)
-    s = sensor(cfg)
+    s = Setup(cfg).sensor()
     z = Observation.broadcast(s, np.array([1300.0, 0.75]), s.R(4.0))
     a.predict()
     a.x[:, 1, :] = np.asarray(cfg.x0)[:, None] + 1.0

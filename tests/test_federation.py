@@ -25,7 +25,7 @@ from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
-from tltrack.models.from_config import sensor
+from tltrack.engine.setup import Setup
 from tltrack.transport import Publisher, Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
@@ -121,8 +121,8 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
         wire = {link: r.bytes() for link, r in relays.items()}
         local = tap.bytes()
     cfg = config()
-    x = truth(cfg, 0)
-    raw = {sid: sentinels(measurements(cfg, 0, x, sid)) for sid in ("primary", "s1")}
+    x = truth(Setup(cfg), 0)
+    raw = {sid: sentinels(measurements(Setup(cfg), 0, x, sid)) for sid in ("primary", "s1")}
     assert found(raw["s1"], local) == len(raw["s1"]), "the sentinels are not what travels"
     for link, data in wire.items():
         assert len(data) > 10_000, link  # the link carried the episode
@@ -165,7 +165,7 @@ def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything
     assert not [k for k in got if k.startswith("tltrack/source/s1/meas/")]
     assert any(k.startswith("tltrack/source/s1/transfer/") for k in got), "no transfer seen"
     assert any(k.startswith("tltrack/primary/meas/") for k in got), "the open router is not open"
-    assert found(sentinels(measurements(cfg, 0, truth(cfg, 0), "s1")), wire) == 0
+    assert found(sentinels(measurements(Setup(cfg), 0, truth(Setup(cfg), 0), "s1")), wire) == 0
 
 
 def test_a_slow_link_costs_no_transfer(tmp_path):
@@ -293,15 +293,15 @@ def test_each_operators_sensor_replays_its_own_rows(tmp_path):
     """Each operator's sensor replays a file of its own rows only (here the engine's draws, so
     the lock-step episode must equal the engine's)."""
     cfg = config()
-    x = truth(cfg, 0)
+    x = truth(Setup(cfg), 0)
     replays = {}
     for sid in ("primary", "s1"):
-        model = sensor(cfg, sid)
+        model = Setup(cfg).sensor(sid)
         path = replays[sid] = tmp_path / f"{sid}.csv"
         with path.open("w", newline="") as fh:
             out = csv.writer(fh)
             out.writerow(["k", "sensor", *model.components])
-            for k, z in enumerate(measurements(cfg, 0, x, sid), start=1):
+            for k, z in enumerate(measurements(Setup(cfg), 0, x, sid), start=1):
                 out.writerow([k, sid, *(repr(float(v)) for v in z)])
     db = tmp_path / "scorer.sqlite"
     with federation(tmp_path) as (s, _relays):

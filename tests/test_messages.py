@@ -243,7 +243,7 @@ def test_a_transfer_describes_its_sensor_and_its_size_follows_the_kind() -> None
     d["eta"] = [1500.0, 0.7]  # two components from a bearing-only sensor
     assert reject(pack(d), Transfer) == "bad_shape"
     d = {**raw(VALID_TRANSFER), "sensor": {**bearing, "kind": "sonar"}}
-    assert reject(pack(d), Transfer) == "invalid"
+    assert reject(pack(d), Transfer) == "unknown_kind"
     d = {**raw(VALID_TRANSFER), "sensor": {**bearing, "sigma_pos": 3.0}}  # not a bearing's
     assert reject(pack(d), Transfer) == "invalid"
     d = raw(VALID_TRANSFER)

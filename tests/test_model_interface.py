@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 from doubles import PositionSensor, cv_model, kalman
 from tltrack.config import make_config
-from tltrack.engine.registry import KINDS, build, parse
-from tltrack.filters.decision import TransferPolicy
-from tltrack.filters.transfer import Primary, Source
+from tltrack.engine.driver import Driver, StepRecord
+from tltrack.engine.registry import build, parse
+from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.filters.kinds import FILTERS
 from tltrack.models import (
     ConstantVelocity,
     CoordinatedTurn,
@@ -55,47 +56,49 @@ def _scenario(seed: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return x, pos + rng.normal(0, 10.0, pos.shape), pos + rng.normal(0, 5.0, pos.shape)
 
 
-ROLES = ["isolated", "source", "tl", "robust", "fusion"]
+ROLES = {
+    "isolated": "",
+    "source": "source-",
+    "tl": "tl-",
+    "robust": "robust-tl-",
+    "fusion": "fusion-",
+}
 
 
 @pytest.mark.parametrize(
     ("kind", "role"),
-    [(k, r) for k in KINDS for r in ROLES if r != "fusion" or k == "pf"],  # fusion: a PF only
+    [(k, r) for k in FILTERS.names() for r in ROLES if r != "fusion" or FILTERS.get(k).particle],
 )
 def test_a_new_sensor_runs_through_every_filter_kind_and_role(kind: str, role: str) -> None:
-    model = cv_model()
-    primary, source = PositionSensor(sigma=10.0), PositionSensor(sigma=5.0)
-    R_p, R_s = primary.R(1.0), source.R(1.0)
+    """Named by its import path in a config, the double steps through the step driver."""
+    cfg = make_config(
+        scenario="cv",
+        particles=2000,
+        primary_intensity=1.0,
+        primary_sensor={"kind": "doubles:PositionSensor", "sigma": 10.0},
+        sources=[{"id": "s1", "sensor": {"kind": "doubles:PositionSensor", "sigma": 5.0}}],
+        trusted=True,
+    )
+    setup = Setup(cfg)
+    assert isinstance(setup.sensor(PRIMARY), PositionSensor)
     truth, z_p, z_s = _scenario()
+    name = f"{ROLES[role]}{kind}"
+    estimates: dict[str, list[np.ndarray]] = {}
+    transfers: list[Observation] = []
+
+    def collect(r: StepRecord) -> None:
+        estimates.setdefault(r.name, []).append(r.estimate.mean)
+        if r.transfer is not None:
+            transfers.append(r.transfer)
+
     x0_hat = np.repeat(X0[:, None], B, 1)
-    runs = list(range(B))
-
-    def make(name: str) -> object:
-        return build(parse(name), CFG, model, x0_hat, runs, source_id="s1")
-
-    src = Source(make(f"source-{kind}"), source, R_s)  # type: ignore[arg-type]
-    prefix = {"isolated": "", "tl": "tl-", "robust": "robust-tl-", "fusion": "fusion-"}
-    if role == "source":
-        prim = None
-    elif role == "robust":
-        twin = Primary(make(kind))  # type: ignore[arg-type]
-        prim = Primary(make(f"robust-tl-{kind}"), TransferPolicy(), twin=twin)  # type: ignore[arg-type]
-    else:
-        prim = Primary(make(f"{prefix[role]}{kind}"))  # type: ignore[arg-type]
-    transfer = None
-    errors = []
+    driver = Driver([setup], [name], x0_hat, list(range(B)), collectors=[[collect]])
     for k in range(1, K + 1):
-        own = Observation.broadcast(primary, z_p[k - 1], R_p)
-        theirs = Observation.broadcast(source, z_s[k - 1], R_s)
-        est_s, upcoming = src.step(theirs)
-        if prim is None:
-            est = est_s
-        else:
-            extra = {"isolated": [], "fusion": [theirs]}.get(role, [transfer] if transfer else [])
-            est = prim.step(own, extra)
-        transfer = upcoming
-        assert upcoming.mean.shape == (2, B) and upcoming.cov.shape == (B, 2, 2)
-        errors.append(np.linalg.norm(est.mean[:, [0, 2]] - truth[k][:, [0, 2]], axis=1))
+        own, theirs = setup.sensors[PRIMARY], setup.sensors["s1"]
+        driver.step(k, [{PRIMARY: own.observe(z_p[k - 1]), "s1": theirs.observe(z_s[k - 1])}])
+    assert all(t.mean.shape == (2, B) and t.cov.shape == (B, 2, 2) for t in transfers)
+    est = np.array(estimates[name])  # (K, B, n)
+    errors = np.linalg.norm(est[:, :, [0, 2]] - truth[1:][:, :, [0, 2]], axis=2)
     assert np.all(np.isfinite(errors))
     # position fixes of 10 m (5 m for the source): a filter that works ends well within that
     assert np.sqrt(np.mean(np.square(errors[-10:]))) < 10.0
@@ -113,7 +116,7 @@ def test_sigma_point_filters_equal_the_kalman_filter_with_the_new_sensor(
     _, z_p, z_s = _scenario(seed=9)
     P_eta = np.diag([30.0, 40.0])  # a transferred statement about the position
     x0_hat = np.repeat(X0[:, None], B, 1)
-    filt = build(parse(kind), CFG, model, x0_hat, list(range(B)))
+    filt = build(parse(kind), Setup(CFG), x0_hat, list(range(B)))
     for k in range(K):
         obs = [Observation.broadcast(sensor, z_p[k], R)]
         if with_transfer:

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 from tltrack.config import make_config
-from tltrack.models import CoordinatedTurn, RangeBearing, motion_model, wrap_angle
+from tltrack.engine.setup import Setup
+from tltrack.models import CoordinatedTurn, RangeBearing, wrap_angle
 
 
 def test_wrap_angle_lands_in_half_open_interval():
@@ -14,7 +15,7 @@ def test_wrap_angle_lands_in_half_open_interval():
 
 @pytest.mark.parametrize("scenario", ["cv", "ct"])
 def test_q_sqrt_is_an_exact_square_root_of_the_singular_q(scenario):
-    m = motion_model(make_config(scenario=scenario))
+    m = Setup(make_config(scenario=scenario)).motion
     np.testing.assert_allclose(m.Q_sqrt @ m.Q_sqrt.T, m.Q, atol=1e-15)
     assert np.linalg.matrix_rank(m.Q) < m.n or scenario == "ct"
     with pytest.raises(np.linalg.LinAlgError):
@@ -22,7 +23,7 @@ def test_q_sqrt_is_an_exact_square_root_of_the_singular_q(scenario):
 
 
 def test_ct_is_continuous_through_zero_turn_rate():
-    m = motion_model(make_config(scenario="ct"))
+    m = Setup(make_config(scenario="ct")).motion
     x = np.array([1000.0, 300.0, 1000.0, 20.0, 0.0])
     near = x.copy()
     near[4] = 1e-7
@@ -32,7 +33,7 @@ def test_ct_is_continuous_through_zero_turn_rate():
 
 @pytest.mark.parametrize("w", [-0.05, 1e-9, 0.2])
 def test_jacobians_match_finite_differences(w):
-    m = motion_model(make_config(scenario="ct"))
+    m = Setup(make_config(scenario="ct")).motion
     s = RangeBearing(10.0, 3e-3, CoordinatedTurn.layout, position=(50.0, -20.0))
     x = np.array([1000.0, 300.0, -400.0, 20.0, w])
     eps = 1e-6

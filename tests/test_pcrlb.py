@@ -7,6 +7,7 @@ from doubles import PositionSensor
 from tltrack.config import make_config
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
+from tltrack.engine.setup import Setup
 from tltrack.models import ConstantVelocity, CoordinatedTurn, RangeBearing
 
 
@@ -33,7 +34,7 @@ def test_linear_gaussian_bound_is_the_kalman_covariance() -> None:
 def test_two_range_bearing_sensors_bound_below_one() -> None:
     cfg = make_config(scenario="ct", preset="arasaratnam-haykin", K=50, truth="random")
     model = CoordinatedTurn(T=cfg.Ts, q1=cfg.q1, q2=cfg.q2)
-    truths = np.stack([truth(cfg, run) for run in range(4)])
+    truths = np.stack([truth(Setup(cfg), run) for run in range(4)])
     P0 = np.diag(cfg.P0_diag)
     primary = RangeBearing(cfg.sigma_r, cfg.sigma_bearing, model.layout)
     source = RangeBearing(cfg.sigma_r, cfg.sigma_bearing, model.layout, (2000.0, -1000.0))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from tltrack.config import ConfigError, make_config
 from tltrack.engine.montecarlo import run_batch
-from tltrack.engine.registry import KINDS
 from tltrack.engine.scenario import truth
+from tltrack.engine.setup import Setup
 from tltrack.engine.truth_file import (
     STATE_LAYOUTS,
     TruthFileError,
@@ -18,7 +18,7 @@ from tltrack.engine.truth_file import (
     experiment_config,
     file_truth,
 )
-from tltrack.models.from_config import motion_model
+from tltrack.filters.kinds import FILTERS
 from typer.testing import CliRunner
 
 TRACK = Path(__file__).resolve().parents[1] / "examples" / "tracks"
@@ -28,12 +28,12 @@ SHIP = next(TRACK.glob("*.csv"))
 def test_a_truth_file_sets_the_truth_mode_k_and_x0() -> None:
     cfg = experiment_config(None, truth_file=SHIP)
     assert cfg.truth == "file" and cfg.K > 2000
-    x = truth(cfg, 0)
+    x = truth(Setup(cfg), 0)
     assert x.shape == (cfg.K + 1, 5)
     np.testing.assert_allclose(x[0], cfg.x0)
-    np.testing.assert_array_equal(truth(cfg, 7), x)  # one track for every run
+    np.testing.assert_array_equal(truth(Setup(cfg), 7), x)  # one track for every run
     shorter = experiment_config(None, truth_file=SHIP, K=50)
-    np.testing.assert_array_equal(truth(shorter, 0), x[:51])
+    np.testing.assert_array_equal(truth(Setup(shorter), 0), x[:51])
 
 
 def test_a_truth_mode_and_a_truth_file_together_are_refused() -> None:
@@ -50,7 +50,7 @@ def test_k_may_only_shorten_the_track() -> None:
 
 def test_a_sensor_on_the_track_is_refused_naming_it_and_the_step() -> None:
     cfg = experiment_config(None, truth_file=SHIP)
-    x, y = truth(cfg, 0)[40, [0, 2]]
+    x, y = truth(Setup(cfg), 0)[40, [0, 2]]
     with pytest.raises(TruthFileError, match=r"s1.*step"):
         configure({"truth_file": SHIP, "sources": [{"id": "s1", "position": [x + 30, y]}]})
 
@@ -63,14 +63,14 @@ def test_a_config_not_completed_from_its_file_is_refused_by_the_engine() -> None
 
 def test_the_truth_files_layouts_are_the_motion_models() -> None:
     for scenario, lay in STATE_LAYOUTS.items():
-        model = motion_model(make_config(scenario=scenario))
+        model = Setup(make_config(scenario=scenario)).motion
         assert (lay.n, lay.pos, lay.vel) == (model.n, model.layout.pos, model.layout.vel)
 
 
 @pytest.mark.parametrize("scenario", ["cv", "ct", "ca"])
 def test_every_filter_kind_runs_on_the_shipped_track(scenario: str) -> None:
     cfg = experiment_config(None, truth_file=SHIP, scenario=scenario, K=60, particles=200)
-    names = [f"{r}{k}" for k in KINDS for r in ("", "tl-")]
+    names = [f"{r}{k}" for k in FILTERS.names() for r in ("", "tl-")]
     stats = run_batch(cfg, names, [0, 1])
     for name in names:  # runs, and stays in the picture (a bootstrap PF with N = 200 may drift)
         rmse = np.sqrt(stats[name].sq_err / 2)

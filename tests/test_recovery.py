@@ -3,18 +3,19 @@ import pytest
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import run_experiment
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
 from tltrack.engine.streams import streams
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.recovery import Recovery
-from tltrack.models import Observation, RangeBearing, motion_model
+from tltrack.models import Observation, RangeBearing
 
 CFG = make_config(preset="arasaratnam-haykin")
 
 
 @pytest.mark.parametrize("kind", [ParticleFilter, AuxiliaryParticleFilter])
 def test_a_cloud_far_from_the_measurement_is_redrawn_around_it(kind):
-    model = motion_model(CFG)
+    model = Setup(CFG).motion
     s = RangeBearing(10.0, 3e-3, model.layout)
     x0 = np.array(CFG.x0)[:, None].repeat(2, 1)
     pf = kind(model, x0, np.diag(CFG.P0_diag), 500, streams(0, range(2), "r"))
@@ -33,9 +34,9 @@ def test_a_cloud_far_from_the_measurement_is_redrawn_around_it(kind):
 
 def test_an_rpf_test_that_finds_nothing_lost_changes_no_number():
     """The auxiliary filter's test reads the transition means its update then reuses."""
-    model = motion_model(CFG)
+    model = Setup(CFG).motion
     s = RangeBearing(CFG.sigma_r, CFG.sigma_bearing, model.layout)
-    run = simulate(CFG, 0)
+    run = simulate(Setup(CFG), 0)
     x0 = run.x0_hat[:, None].repeat(2, 1)
     tested, plain = (
         AuxiliaryParticleFilter(model, x0, np.diag(CFG.P0_diag), 500, streams(0, range(2), "r"))

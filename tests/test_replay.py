@@ -8,14 +8,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from tltrack.config import make_config
-from tltrack.models.from_config import sensor
+from tltrack.engine.setup import Setup
 from tltrack.replay import ReplayError, load
 
 CFG = make_config(
     primary_sensor={"kind": "bearing"},
     sources=[{"id": "s1", "sensor": {"kind": "range-bearing-doppler", "position": [-3000, 0]}}],
 )
-SENSORS = {sid: sensor(CFG, sid) for sid in ("primary", "s1")}
+SENSORS = {sid: Setup(CFG).sensor(sid) for sid in ("primary", "s1")}
 HEADER = "k,sensor,range_m,bearing_rad,range_rate_mps,x_m,y_m\n"
 
 

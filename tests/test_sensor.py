@@ -13,6 +13,7 @@ from livestack import SIM_DEFAULTS
 from tltrack import keys
 from tltrack.config import make_config
 from tltrack.engine.scenario import measurements, truth
+from tltrack.engine.setup import Setup
 from tltrack.messages import Measurement, Tick, encode
 from tltrack.services.sensor import sensor as sensor_svc
 
@@ -46,7 +47,7 @@ def test_every_tick_is_measured_once_whatever_the_order_across_keys(order: str) 
     assert all(isinstance(m, Measurement) for m in sent)
     assert [m.k for m in sent] == list(range(1, K + 1))
     cfg = make_config(**SIM_DEFAULTS, K=K, particles=50)
-    want = measurements(cfg, 0, truth(cfg, 0), "primary")
+    want = measurements(Setup(cfg), 0, truth(Setup(cfg), 0), "primary")
     np.testing.assert_array_equal(np.array([m.z for m in sent]), want)
     # an end that came early lets the episode go with its last tick (one that comes last
     # leaves it to the bound of max_episodes)

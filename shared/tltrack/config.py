@@ -119,6 +119,8 @@ class SensorSpec(BaseModel):
                 raise ValueError(
                     f"{name} is not a parameter of a {self.kind} sensor (its parameters: {own})"
                 )
+            if isinstance(value, float) and not math.isfinite(value):
+                raise PydanticCustomError("finite_number", "{name} must be finite", {"name": name})
             extra[name] = declared[name].check(value)
         return self
 

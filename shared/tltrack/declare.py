@@ -105,6 +105,8 @@ class Registry(Generic[T]):
         self._name_of, self._check = name_of, check
         self._kinds: dict[str, T] = {}
         self._plugins_loaded = False
+        #: kind -> the import path it was registered from (the user's own config named it)
+        self.imported: dict[str, str] = {}
         for cls in builtins:
             self.register(cls)
 
@@ -157,7 +159,9 @@ class Registry(Generic[T]):
             if name in self._kinds:
                 return self._kinds[name]
             if IMPORT_PATH.match(name):
-                return self.register(self._import(name), name)
+                cls = self.register(self._import(name), name)
+                self.imported[self._name_of(cls)] = name
+                return cls
         known = ", ".join(self.names())
         hint = (
             " (not imported: a kind is named by its import path in the user's own config only)"

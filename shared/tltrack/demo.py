@@ -30,7 +30,7 @@ from typing import IO, Any
 
 import zenoh
 
-from tltrack import keys, topology
+from tltrack import keys, plugins, topology
 from tltrack.config import Config
 from tltrack.topology import ACCESS_DIR, Topology
 from tltrack.topology import free_port as free_port
@@ -204,6 +204,7 @@ class Stack:
             **os.environ,
             "TLTRACK_ZENOH_ENDPOINTS": json.dumps([self.endpoint]),
             "PYTHONUNBUFFERED": "1",
+            plugins.ENV: plugins.passed_on(),  # the kinds this process imported, by import path
             **self.env,
             **(env or {}),
         }

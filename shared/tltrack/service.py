@@ -25,7 +25,7 @@ import zenoh
 from pydantic import ValidationError
 from pydantic_settings import BaseSettings
 
-from tltrack import keys
+from tltrack import keys, plugins
 from tltrack.config import describe_validation_error
 from tltrack.messages import Message, RejectCounter
 from tltrack.transport import (
@@ -45,7 +45,13 @@ S = TypeVar("S", bound=BaseSettings)
 
 
 def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
-    """Settings from the environment and ``--flags``; exits with status 2 naming a bad field."""
+    """Settings from the environment and ``--flags``, once the plugin kinds this process is told
+    of are loaded (:mod:`tltrack.plugins`); exits with status 2 naming a bad field."""
+    try:
+        plugins.load()
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
     try:
         return cls(_cli_parse_args=sys.argv[1:] if argv is None else argv)
     except ValidationError as err:
