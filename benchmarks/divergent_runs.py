@@ -2,7 +2,8 @@
 runs of a ``results.json`` whose run RMSE passes ``--over`` metres for any of ``--filters`` (or
 the runs named by ``--runs``, in the setting the flags name), each at every particle count of
 ``--particles``, and prints each filter's run RMSE and final error per run (the engine's per-run
-streams make the first count reproduce the table's own figures).
+streams make the first count reproduce the table's own figures). ``--rerun`` reruns other
+filters than ``--filters`` on those runs (another proposal, ``proposals.py``).
 
     .venv/bin/python benchmarks/divergent_runs.py \\
         docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json \\
@@ -32,6 +33,7 @@ def main() -> None:
     ap.add_argument("--truth-seed", type=int, default=0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--filters", default="rpf,tl-rpf,robust-tl-rpf")
+    ap.add_argument("--rerun", help="the filters rerun on those runs (default: --filters)")
     ap.add_argument("--compare", default="ukf,tl-ukf", help="filters rerun beside them")
     ap.add_argument("--over", type=float, default=500.0)
     ap.add_argument("--particles", default="6000,24000")
@@ -58,14 +60,16 @@ def main() -> None:
         print(f"runs whose run RMSE passes {args.over:g} m for one of {', '.join(names)}: {runs}")
     else:
         ap.error("name a results.json or --runs")
-    everyone = names + [n for n in args.compare.split(",") if n]
+    rerun = args.rerun.split(",") if args.rerun else names
+    everyone = rerun + [n for n in args.compare.split(",") if n]
     for N in (int(p) for p in args.particles.split(",")):
         stats = run_batch(cfg.with_(particles=N), everyone, runs)
         print(f"N = {N}, run RMSE / final error [m] of runs {runs}:")
+        width = max(14, *map(len, stats))
         for n, s in stats.items():
             rmse, final = np.sqrt(np.ravel(s.run_mse)), np.ravel(s.final_err)
             print(
-                f"  {n:14s} "
+                f"  {n:{width}s} "
                 + " ".join(f"{r:5.0f}/{f:<5.0f}" for r, f in zip(rmse, final, strict=True))
             )
 

@@ -16,6 +16,7 @@ import numpy as np
 from tltrack.bench import run_bench
 from tltrack.config import Config, make_config
 from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
 from tltrack.filters.warm import warm_up
 from tltrack.messages import Measurement, Transfer
 from tltrack.tracking import PrimaryEpisode, SourceEpisode
@@ -32,7 +33,7 @@ def pause(seconds: float, spin: bool) -> None:
 
 def tl_steps_ms(cfg: Config, kind: str, pause_s: float, spin: bool = False) -> list[float]:
     """The TL steps of one episode as the primary_tracker takes them (messages in, estimate out)."""
-    sim = simulate(cfg, 0)
+    sim = simulate(Setup(cfg), 0)
     primary, source = PrimaryEpisode(cfg, 0, kind), SourceEpisode(cfg, 0, kind, "s1")
     out: list[float] = []
     transfers: dict[str, Transfer] = {}

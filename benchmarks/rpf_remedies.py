@@ -11,38 +11,26 @@ error > 100 m), overall RMSE and median ms per step:
 - ``sir+reinit``: the same, reinitialised around the last measurement when it loses the track
   (the ``recovery`` option, :mod:`tltrack.filters.recovery`);
 - ``apf b=<beta>``: the auxiliary particle filter of :mod:`tltrack.filters.auxiliary` (``rpf``)
-  with the look-ahead exponent beta. The product uses ``auxiliary.BETA``, chosen with this
-  script on a truth seed that no reported figure uses (``--truth-seed 11``).
-
-beta is set in each worker before any filter is built (the filter's default argument), so the
-script runs its own process pool.
+  with the look-ahead exponent beta (its parameter ``rpf_beta``, set through the config's
+  ``filter_options``). The product uses ``auxiliary.BETA``, chosen with this script on a truth
+  seed that no reported figure uses (``--truth-seed 11``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import FilterResult, run_batch, run_experiment
-from tltrack.filters import auxiliary
+
+#: (label, filter kind, recovery, the config's filter_options)
+Variant = tuple[str, str, bool, dict[str, dict[str, float]]]
 
 
-def set_beta(beta: float) -> None:
-    """Make ``beta`` the default look-ahead exponent of every filter built in this process."""
-    init = auxiliary.AuxiliaryParticleFilter.__init__
-    names = init.__code__.co_varnames[: init.__code__.co_argcount]
-    defaults = list(init.__defaults__ or ())
-    defaults[names[-len(defaults) :].index("beta")] = beta
-    init.__defaults__ = tuple(defaults)
-
-
-def variants(betas: list[float]) -> list[tuple[str, str, bool, float]]:
-    """(label, filter kind, recovery, beta)."""
-    out = [("sir", "pf", False, auxiliary.BETA), ("sir+reinit", "pf", True, auxiliary.BETA)]
-    return out + [(f"apf b={b:g}", "rpf", False, b) for b in betas]
+def variants(betas: list[float]) -> list[Variant]:
+    out: list[Variant] = [("sir", "pf", False, {}), ("sir+reinit", "pf", True, {})]
+    return out + [(f"apf b={b:g}", "rpf", False, {"rpf": {"rpf_beta": b}}) for b in betas]
 
 
 def row(label: str, name: str, r: FilterResult) -> dict[str, object]:
@@ -67,7 +55,7 @@ def main() -> None:
     a = ap.parse_args()
     rows: list[dict[str, object]] = []
     print(f"{'variant':<12} {'filter':<12} {'lost':>7} {'RMSE m':>9} {'ms/step':>8}")
-    for label, kind, recovery, beta in variants([float(b) for b in a.betas.split(",")]):
+    for label, kind, recovery, options in variants([float(b) for b in a.betas.split(",")]):
         cfg = make_config(
             preset="paper",
             truth="fixed",
@@ -77,13 +65,11 @@ def main() -> None:
             runs=a.runs,
             seed=a.seed,
             recovery=recovery,
+            filter_options=options,
         )
         names = [kind, f"tl-{kind}"]
-        set_beta(beta)
         run_batch(cfg.with_(K=2), names, [0])  # the kernels, loaded outside the clock
-        ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(a.workers, ctx, initializer=set_beta, initargs=(beta,)) as ex:
-            results = run_experiment(cfg, names, executor=ex)
+        results = run_experiment(cfg, names, workers=a.workers)
         for name, r in results.items():
             rows.append(row(label, name, r))
             ms = f"{r.ms_per_step:.3f}" if r.ms_per_step is not None else "-"

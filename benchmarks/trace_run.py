@@ -1,9 +1,8 @@
 """One run of TL-RPF, step by step: how a divergence unfolds. Replays run ``--run`` of a setting
-in lock step as the live services do (:class:`~tltrack.tracking.SourceEpisode` and
-:class:`~tltrack.tracking.PrimaryEpisode`, which compute what the engine computes for that run),
-and prints at each step the position error of the TL, isolated and source estimates, the TL
-cloud's effective sample size and weighted spread (position, velocity, turn rate), and the true
-and estimated turn rate.
+through the step driver (:class:`~tltrack.engine.driver.Driver`, a batch of that one run: what
+the engine computes for it), and prints at each step the position error of the TL, isolated and
+source estimates, the TL cloud's effective sample size and weighted spread (position, velocity,
+turn rate), and the true and estimated turn rate.
 
     .venv/bin/python benchmarks/trace_run.py --run 6275 [--preset arasaratnam-haykin]
         [--truth random] [--particles 6000] [--every 1]
@@ -15,11 +14,34 @@ import argparse
 
 import numpy as np
 from tltrack.config import make_config
+from tltrack.engine.driver import Driver, StepRecord, effective_sample_size
 from tltrack.engine.scenario import simulate
-from tltrack.filters.base import Estimate
+from tltrack.engine.setup import Setup
 from tltrack.filters.warm import warm_up
-from tltrack.messages import Measurement, Transfer
-from tltrack.tracking import PrimaryEpisode, SourceEpisode
+
+IX, IV, IY, IW, IO = 0, 1, 2, 3, 4  # the CT state (x, vx, y, vy, omega)
+
+
+class Trace:
+    """A collector: each filter's estimate at the step, and the TL cloud's ESS and spread."""
+
+    def __init__(self, tl: str) -> None:
+        self.tl = tl
+        self.estimates: dict[str, np.ndarray] = {}
+        self.ess, self.sd = 0.0, np.zeros(0)
+
+    def __call__(self, r: StepRecord) -> None:
+        self.estimates[r.name] = r.estimate.mean[0]
+        if r.name != self.tl:
+            return
+        ess = effective_sample_size(r.filter)
+        assert ess is not None, "the trace reads a weighted cloud: a particle filter only"
+        logw = r.filter.log_weights[0]
+        w = np.exp(logw - logw.max())
+        w /= w.sum()
+        cloud = r.filter.x[:, 0, :]
+        mean = cloud @ w
+        self.ess, self.sd = float(ess[0]), np.sqrt(((cloud - mean[:, None]) ** 2) @ w)
 
 
 def main() -> None:
@@ -44,44 +66,32 @@ def main() -> None:
     )
     if cfg.scenario != "ct":
         ap.error("the trace reads the turn rate: a CT scenario only")
-    sim = simulate(cfg, args.run)
-    primary, source = (
-        PrimaryEpisode(cfg, args.run, "rpf"),
-        SourceEpisode(cfg, args.run, "rpf", "s1"),
+    setup = Setup(cfg)
+    sim = simulate(setup, args.run)
+    trace = Trace("tl-rpf")
+    driver = Driver(
+        [setup], ["tl-rpf", "rpf"], sim.x0_hat[:, None], [args.run], collectors=[[trace]]
     )
-    tl = primary.tl.filter
     x = sim.truth
-    ix, iv, iy, iw, io = 0, 1, 2, 3, 4  # the CT state (x, vx, y, vy, omega)
 
-    def err(e: Estimate, k: int) -> float:
-        return float(np.hypot(e.mean[0, ix] - x[k, ix], e.mean[0, iy] - x[k, iy]))
+    def err(name: str, k: int) -> float:
+        m = trace.estimates[name]
+        return float(np.hypot(m[IX] - x[k, IX], m[IY] - x[k, IY]))
 
     print(
         "   k  err TL   isol.  source |  ESS  sd x/y [m]   vx/vy [m/s]  omega [deg/s]"
         " | omega true/TL"
     )
-    transfers: dict[str, Transfer] = {}
     for k in range(1, cfg.K + 1):
-        z = {
-            sid: Measurement(episode="e", sender=sid, k=k, t_sensor=0.0, sensor=sid, z=zk[k - 1])
-            for sid, zk in sim.z.items()
-        }
-        est_s, eta = source.step(z["s1"])
-        est = primary.step(z["primary"], transfers)
-        iso = primary.step_twin(z["primary"])
-        w = np.exp(tl._logw[0] - tl._logw[0].max())
-        w /= w.sum()
-        cloud = tl.x[:, 0, :]
-        mean = cloud @ w
-        sd = np.sqrt(((cloud - mean[:, None]) ** 2) @ w)
+        driver.step(k, [{i: setup.sensors[i].observe(sim.z[i][k - 1]) for i in setup.sensor_ids}])
+        sd = trace.sd
         if k % args.every == 0:
             print(
-                f"{k:4d} {err(est, k):7.1f} {err(iso, k):7.1f} {err(est_s, k):7.1f} |"
-                f" {1.0 / (w @ w):5.0f} {sd[ix]:5.1f}/{sd[iy]:<5.1f} {sd[iv]:5.2f}/{sd[iw]:<5.2f}"
-                f" {np.degrees(sd[io]):6.3f} | {np.degrees(x[k, io]):6.2f}/"
-                f"{np.degrees(est.mean[0, io]):6.2f}"
+                f"{k:4d} {err('tl-rpf', k):7.1f} {err('rpf', k):7.1f} {err('source-rpf', k):7.1f} |"
+                f" {trace.ess:5.0f} {sd[IX]:5.1f}/{sd[IY]:<5.1f} {sd[IV]:5.2f}/{sd[IW]:<5.2f}"
+                f" {np.degrees(sd[IO]):6.3f} | {np.degrees(x[k, IO]):6.2f}/"
+                f"{np.degrees(trace.estimates['tl-rpf'][IO]):6.2f}"
             )
-        transfers = {"s1": source.transfer_message(eta, "e", k, 0.0)}
 
 
 if __name__ == "__main__":

@@ -8,51 +8,49 @@ docs/rpf.md ("The one 1000-run cell where `tl-rpf` trails `tl-ukf`"):
   the turns, say); the cosine between two filters' bias sequences says whether they err the
   same way, and the correlation of what is left over, whether their random errors do.
 
+Every filter (and the sources the TL ones listen to) steps once, in one batch of the runs, through
+the step driver; a collector keeps the estimates and the sources' transfers.
+
     .venv/bin/python benchmarks/turn_bias.py [--runs 100] [--truth-seed 4]
 """
 
 from __future__ import annotations
 
 import argparse
+from collections import defaultdict
 
 import numpy as np
-from tltrack.config import Config, make_config
-from tltrack.engine.montecarlo import run_batch
-from tltrack.engine.scenario import simulate, truth
+from tltrack.config import make_config
+from tltrack.engine.driver import Driver, StepRecord
+from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
 from tltrack.filters.warm import warm_up
-from tltrack.messages import Measurement
-from tltrack.models.base import MeasurementModel
-from tltrack.tracking import SourceEpisode
+from tltrack.models.observation import Observation
 
 Array = np.ndarray
 
 
-def transfer_nis(cfg: Config, kind: str, runs: int) -> float:
-    """Mean over runs and steps of (z_{k+1} - eta)' P_eta^-1 (z_{k+1} - eta) for source s1."""
+class Record:
+    """A collector: each filter's estimated mean (B, n_x) and each source's transfer, per step."""
+
+    def __init__(self) -> None:
+        self.means: dict[str, list[Array]] = defaultdict(list)
+        self.transfers: dict[str, list[Observation]] = defaultdict(list)
+
+    def __call__(self, r: StepRecord) -> None:
+        self.means[r.name].append(r.estimate.mean)
+        if r.transfer is not None:
+            self.transfers[r.name].append(r.transfer)
+
+
+def transfer_nis(transfers: list[Observation], z: Array) -> float:
+    """Mean over runs and steps of (z_{k+1} - eta)' P_eta^-1 (z_{k+1} - eta); the transfer of
+    step k is for k + 1, z (K, n_z, B) the source's measurements."""
     nis = []
-    for run in range(runs):
-        z = simulate(cfg, run).z["s1"]
-        src = SourceEpisode(cfg, run, kind, "s1")
-        sensor: MeasurementModel = src.sensor.model
-        eta = None
-        for k, z_k in enumerate(z, start=1):
-            if eta is not None:
-                d = sensor.residual(z_k[:, None, None], eta.mean[:, :, None])[:, 0, 0]
-                nis.append(float(d @ np.linalg.solve(eta.cov[0], d)))
-            m = Measurement(episode="e", sender="s1", k=k, t_sensor=0.0, sensor="s1", z=z_k)
-            _, eta = src.step(m)
+    for eta, z_next in zip(transfers[:-1], z[1:], strict=True):
+        d = eta.sensor.residual(z_next[:, :, None], eta.mean[:, :, None])[:, :, 0].T  # (B, n_z)
+        nis.append(np.einsum("bi,bi->b", d, np.linalg.solve(eta.cov, d[:, :, None])[:, :, 0]))
     return float(np.mean(nis))
-
-
-def position_errors(cfg: Config, names: list[str], runs: int) -> dict[str, Array]:
-    """Position error (K, runs, 2) of each filter (and of the sources the TL ones need)."""
-    stats = run_batch(cfg, names, list(range(runs)), keep_tracks=True)
-    x = truth(cfg, 0)
-    out = {}
-    for name, s in stats.items():
-        t = np.concatenate(s.tracks, axis=1)  # (K, B, n)
-        out[name] = np.stack([t[:, :, 0] - x[1:, None, 0], t[:, :, 2] - x[1:, None, 2]], axis=-1)
-    return out
 
 
 def main() -> None:
@@ -70,12 +68,22 @@ def main() -> None:
         particles=args.particles,
         primary_intensity=4.0,
     )
+    setup, runs = Setup(cfg), list(range(args.runs))
+    sims = [simulate(setup, r) for r in runs]
+    z = {i: np.stack([s.z[i] for s in sims], axis=2) for i in setup.sensor_ids}  # (K, n_z, B)
+    record = Record()
+    x0_hat = np.stack([s.x0_hat for s in sims], axis=1)
+    driver = Driver(
+        [setup], ["rpf", "ukf", "tl-rpf", "tl-ukf"], x0_hat, runs, collectors=[[record]]
+    )
+    for k in range(1, cfg.K + 1):
+        driver.step(k, [{i: setup.sensors[i].observe(z[i][k - 1]) for i in setup.sensor_ids}])
     for kind in ("rpf", "ukf"):
-        print(
-            f"source-{kind}: mean NIS of z_(k+1) under its transfer (2 if honest):"
-            f" {transfer_nis(cfg, kind, args.runs):.2f}"
-        )
-    err = position_errors(cfg, ["rpf", "ukf", "tl-rpf", "tl-ukf"], args.runs)
+        nis = transfer_nis(record.transfers[f"source-{kind}"], z["s1"])
+        print(f"source-{kind}: mean NIS of z_(k+1) under its transfer (2 if honest): {nis:.2f}")
+    x = np.stack([s.truth for s in sims], axis=1)[1:]  # (K, B, n_x)
+    pos = list(setup.layout.pos)
+    err = {n: (np.stack(m) - x)[:, :, pos] for n, m in record.means.items()}  # (K, B, 2)
     bias = {n: e.mean(axis=1) for n, e in err.items()}  # (K, 2)
     print("filter       |bias| mean over k, in the two turns (k = 25-35, 80-90) [m]")
     for n, b in bias.items():
