@@ -3,7 +3,6 @@ from doubles import PositionSensor, cv_model, kalman
 from tltrack.engine.streams import streams
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices
-from tltrack.filters.transfer import Primary
 from tltrack.models.observation import Observation
 
 R = np.diag([25.0, 25.0])
@@ -36,13 +35,13 @@ def test_pf_mean_approaches_the_kalman_mean_as_n_grows():
     errors = {}
     for n in (300, 30_000):
         B = 12
-        pf = Primary(
-            ParticleFilter(
-                model, np.repeat(X0[:, None], B, 1), P0, n, streams(1, range(B), f"pf{n}")
-            )
+        pf = ParticleFilter(
+            model, np.repeat(X0[:, None], B, 1), P0, n, streams(1, range(B), f"pf{n}")
         )
         for z, _ in zip(zs, kf, strict=True):
-            est = pf.step(Observation.broadcast(sensor, np.repeat(z[:, None], B, 1), R))
+            pf.predict()
+            pf.update([Observation.broadcast(sensor, np.repeat(z[:, None], B, 1), R)])
+        est = pf.estimate()
         m_kf = kf[-1][0]
         errors[n] = np.sqrt(np.mean((est.mean - m_kf) ** 2 / np.diag(kf[-1][1])))
     assert errors[30_000] < errors[300] / 4  # ~ sqrt(100) = 10 in expectation
@@ -52,13 +51,15 @@ def test_pf_mean_approaches_the_kalman_mean_as_n_grows():
 def test_tl_with_a_vague_transfer_is_the_isolated_pf():
     model, sensor, zs = cv_model(), PositionSensor(), _measurements()
     x0 = np.repeat(X0[:, None], 4, 1)
-    iso = Primary(ParticleFilter(model, x0, P0, 2000, streams(5, range(4), "same")))
-    tl = Primary(ParticleFilter(model, x0, P0, 2000, streams(5, range(4), "same")))
+    iso = ParticleFilter(model, x0, P0, 2000, streams(5, range(4), "same"))
+    tl = ParticleFilter(model, x0, P0, 2000, streams(5, range(4), "same"))
     vague = Observation.broadcast(sensor, np.array([0.0, 0.0]), 1e14 * np.eye(2))
     for z in zs:
         obs = Observation.broadcast(sensor, z, R)
-        a, b = iso.step(obs), tl.step(obs, [vague])
-    np.testing.assert_allclose(a.mean, b.mean, atol=1e-9)
+        for pf, statements in ((iso, [obs]), (tl, [obs, vague])):
+            pf.predict()
+            pf.update(statements)
+    np.testing.assert_allclose(iso.estimate().mean, tl.estimate().mean, atol=1e-9)
 
 
 def test_two_sharp_likelihoods_never_give_nan():

@@ -36,7 +36,6 @@ from tltrack.topology import ACCESS_DIR, Topology
 from tltrack.topology import free_port as free_port
 from tltrack.transport import Publisher, ZenohSettings, open_session, query
 
-SERVICES = ("scorer", "primary_tracker", "source_tracker", "sensor_sim")
 #: the signals that stop a command and every process it started
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 

@@ -296,9 +296,6 @@ class Subscriber:
         """The next sample, waiting up to ``timeout`` s (forever if None); None on timeout/close."""
         return self._queue.pop(timeout)
 
-    def try_recv(self) -> Received | None:
-        return self._queue.pop(0.0)
-
     def drain(self, max_items: int | None = None) -> list[Received]:
         """Everything queued now (at most ``max_items``), without waiting."""
         return self._queue.drain(max_items)

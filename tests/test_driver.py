@@ -1,0 +1,129 @@
+"""The step driver: the one place the roles step, its transfer channel, and its collectors."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tltrack.config import make_config
+from tltrack.engine.driver import Direct, Driver, Lossy, StepRecord, effective_sample_size
+from tltrack.engine.montecarlo import Scores, run_batch
+from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
+
+pytestmark = pytest.mark.unit
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the product's code: every module here steps the roles through the driver
+PRODUCT = ("shared/tltrack", "services", "benchmarks", "examples", "scripts")
+DRIVER = ROOT / "shared/tltrack/engine/driver.py"
+ROLES = ROOT / "shared/tltrack/filters/transfer.py"
+
+
+def test_no_module_but_the_driver_uses_the_roles() -> None:
+    """Source and Primary (Algorithms 1 and 2) are built and stepped in the driver only; the
+    roles' own tests (test_fast_pf) are the one exception outside the product."""
+    offenders = []
+    for folder in PRODUCT:
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            if path.resolve() in (DRIVER.resolve(), ROLES.resolve()) or ".venv" in path.parts:
+                continue
+            tree = ast.parse(path.read_text(), str(path))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom) and node.module == "tltrack.filters.transfer":
+                    offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+                if isinstance(node, ast.Attribute) and node.attr in ("Source", "Primary"):
+                    offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not offenders, f"roles used outside the driver: {offenders}"
+
+
+CFG = make_config(preset="arasaratnam-haykin", truth="fixed", K=20, particles=300, seed=4)
+RUNS = [0, 1, 2]
+
+
+def _steps(channel: object | None, names: list[str]) -> dict[str, list[StepRecord]]:
+    """Every record of ``names`` over the runs, the transfers carried by ``channel``."""
+    setup = Setup(CFG)
+    sims = [simulate(setup, r) for r in RUNS]
+    x0 = np.stack([s.x0_hat for s in sims], axis=1)
+    out: dict[str, list[StepRecord]] = {}
+    driver = Driver(
+        [setup],
+        names,
+        x0,
+        RUNS,
+        channel=channel,
+        collectors=[[lambda r: out.setdefault(r.name, []).append(r)]],  # type: ignore[arg-type]
+    )
+    for k in range(1, CFG.K + 1):
+        z = {
+            i: setup.sensors[i].observe(np.stack([s.z[i][k - 1] for s in sims], 1))
+            for i in setup.sensor_ids
+        }
+        driver.step(k, [z])
+    return out
+
+
+def _means(records: list[StepRecord]) -> np.ndarray:
+    return np.stack([r.estimate.mean for r in records])
+
+
+def test_a_link_that_loses_every_transfer_leaves_tl_exactly_the_isolated_filter() -> None:
+    """Common random numbers: TL with nothing delivered is the isolated filter, bit for bit."""
+    lost = _steps(Lossy(RUNS, seed=1, drop=1.0), ["pf", "tl-pf"])
+    np.testing.assert_array_equal(_means(lost["tl-pf"]), _means(lost["pf"]))
+    assert all(r.used is None for r in lost["tl-pf"])  # nothing was ever delivered
+
+
+def test_a_perfect_lossy_link_is_the_direct_one_and_a_lossy_one_is_seeded() -> None:
+    direct = _steps(Direct(), ["tl-pf"])["tl-pf"]
+    perfect = _steps(Lossy(RUNS, seed=1), ["tl-pf"])["tl-pf"]
+    np.testing.assert_array_equal(_means(perfect), _means(direct))
+    a = _steps(Lossy(RUNS, seed=1, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
+    b = _steps(Lossy(RUNS, seed=1, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
+    c = _steps(Lossy(RUNS, seed=2, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
+    np.testing.assert_array_equal(_means(a), _means(b))
+    assert not np.array_equal(_means(a), _means(c))
+    used = np.array([np.zeros(len(RUNS), bool) if r.used is None else r.used for r in a])
+    assert 0.2 < used[2:].mean() < 0.9  # about 70% arrive, some too late to be newest
+
+
+def test_a_late_transfer_overtaken_by_a_newer_one_is_discarded() -> None:
+    setup = Setup(CFG)
+    z = setup.sensors["s1"].observe(np.zeros((2, 2)))
+    ch = Lossy([0, 1], seed=0, delay=0, jitter=0)
+    ch.send(("source-pf", "s1"), 2, z)
+    ch.send(("source-pf", "s1"), 3, z)
+    assert ch.receive(("source-pf", "s1"), 3) is not None  # the newest, made for 3
+    assert ch.receive(("source-pf", "s1"), 4) is None  # the one for 2 is older: never taken
+
+
+def test_the_engine_is_the_driver_with_the_scores_collector() -> None:
+    """run_batch's statistics are those a Scores collector gathers from the driver's records."""
+    setup = Setup(CFG)
+    sims = [simulate(setup, r) for r in RUNS]
+    truth = np.stack([s.truth for s in sims], axis=1)
+    records = _steps(None, ["rpf", "tl-rpf"])
+    scores = Scores(truth, setup.layout, timing=False, keep_tracks=False)
+    for rs in records.values():
+        for r in rs:
+            scores(r)
+    mine, engine = scores.close(), run_batch(CFG, ["rpf", "tl-rpf"], RUNS)
+    assert mine.keys() == engine.keys()
+    for name in engine:
+        np.testing.assert_array_equal(mine[name].sq_err, engine[name].sq_err)
+        assert mine[name].transfer_steps == engine[name].transfer_steps
+
+
+def test_collectors_see_the_diagnostics_of_every_step() -> None:
+    records = _steps(None, ["tl-rpf", "robust-tl-rpf"])
+    assert {len(v) for v in records.values()} == {CFG.K}
+    assert records.keys() == {"tl-rpf", "robust-tl-rpf", "source-rpf"}
+    ess = np.array([effective_sample_size(r.filter) for r in records["tl-rpf"]])
+    assert ess.shape == (CFG.K, len(RUNS)) and np.all((ess >= 1) & (ess <= CFG.particles))
+    sent = [r.transfer for r in records["source-rpf"]]
+    assert all(t is not None and t.origin == "s1" for t in sent)
+    assert records["tl-rpf"][0].used is None  # no transfer exists for k = 1
+    assert all(r.used.all() for r in records["tl-rpf"][1:])  # type: ignore[union-attr]
