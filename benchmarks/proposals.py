@@ -16,8 +16,8 @@ weighs it exactly), and a filter kind that runs ``rpf`` with it, registered on i
 
 Every role applies (``tl-rpf-defensive``, ``robust-tl-rpf-defensive``, ...; a TL one listens to
 ``source-<its kind>``), without lost-track recovery, on the local process pool (its workers are
-forked with the kinds registered). A kind's random streams are named by the kind: its runs share
-their truths and measurements with ``rpf``'s, not its draws. Usage: ``tltrack`` and a command,
+forked with the kinds registered). Each kind draws ``rpf``'s random streams (``streams_of``), so
+its runs are paired with ``rpf``'s draw for draw. Usage: ``tltrack`` and a command,
 or the arguments of ``divergent_runs.py`` (its ``--rerun`` names the variants to rerun):
 
     .venv/bin/python benchmarks/proposals.py \\
@@ -129,9 +129,11 @@ class Linearised:
 
 
 class _WithProposal(AuxiliaryParticleFilter):
-    """``rpf`` with a ``proposal_class`` in place of the transition prior."""
+    """``rpf`` with a ``proposal_class`` in place of the transition prior, drawing ``rpf``'s
+    random numbers (paired with it run by run)."""
 
     proposal_class: type[Proposal]
+    streams_of = "rpf"
 
     @classmethod
     def build(

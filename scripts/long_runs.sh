@@ -116,11 +116,12 @@ done
 # Two more proposals for rpf (benchmarks/proposals.py), on the 13 divergent runs at N = 6000,
 # and the defensive one over the held-out seed's 10,000 runs.
 for p in defensive linearised; do
-    run "proposals-$p-ah-random" --script benchmarks/proposals.py "$p" \
+    run "proposals-$p-ah-random" --script benchmarks/proposals.py \
         "$ROOT/docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json" \
-        --particles 6000 --compare ""
+        --particles 6000 --compare "" --rerun "rpf-$p,tl-rpf-$p,robust-tl-rpf-$p"
 done
-run proposals-defensive-seed1 --script benchmarks/proposals.py defensive tltrack experiment \
-    --scenario ct --preset arasaratnam-haykin --truth random --filters rpf,tl-rpf,robust-tl-rpf \
+run proposals-defensive-seed1 --script benchmarks/proposals.py tltrack experiment \
+    --scenario ct --preset arasaratnam-haykin --truth random \
+    --filters rpf-defensive,tl-rpf-defensive,robust-tl-rpf-defensive \
     --particles 6000 --runs 10000 --primary-intensity 4 --seed 1 \
     --out "$OUT/proposals/defensive-ah-random-seed1"

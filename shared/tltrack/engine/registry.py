@@ -84,9 +84,12 @@ def stream_purpose(spec: FilterSpec, source_id: str | None = None) -> str:
 
     The primary's variants of one kind (isolated, TL, robust, fusion) share their numbers: common
     random numbers, so that a run where the transfer changes nothing gives the isolated result
-    exactly, and paired differences between them measure the transfer, not the dice.
+    exactly, and paired differences between them measure the transfer, not the dice. A kind that
+    varies another (a proposal study's ``rpf-defensive``) may declare ``streams_of = "rpf"`` to
+    draw that kind's numbers, so the two are paired run by run too.
     """
-    return f"{spec.name}/{source_id}" if spec.role == "source" else spec.kind
+    kind = getattr(FILTERS.get(spec.kind), "streams_of", spec.kind)
+    return f"source-{kind}/{source_id}" if spec.role == "source" else kind
 
 
 def recovery(spec: FilterSpec, cfg: Config) -> Recovery | None:
