@@ -17,13 +17,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/tltrack demo
 
-## Every test: unit, integration over real Zenoh, container, browser and fault tests; ruff and mypy.
+## Every test, on every core: unit, integration over real Zenoh, system (containers, the wheel,
+## the browser, the golden worktree); ruff and mypy. The 25 slowest tests are listed at the end.
 test: $(STAMP) lint warm
-	$(PYTEST) -q -ra
+	$(PYTEST) -q -ra -n auto --dist loadgroup --durations=25
 
-## The fast everyday subset: lint, types and unit tests.
+## The fast everyday subset: lint, types and the unit tier.
 check: $(STAMP) lint warm
-	$(PYTEST) -q -ra -m "not slow and not integration and not docker"
+	$(PYTEST) -q -ra -n auto -m unit
 
 ## Compile the particle-filter kernels once, so parallel test processes load them from the cache.
 warm: $(STAMP)

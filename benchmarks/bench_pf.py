@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_pf.py [--particles 6000] [--repeats 3] [--json FILE]
 
-The same as ``tltrack bench``: see :mod:`tltrack.bench`. No timing is asserted anywhere in the
+The same as ``tltrack bench``: see :mod:`tltrack.perf.bench`. No timing is asserted anywhere in the
 tests; track regressions by comparing these figures (ratios are steadier than absolute times on a
 shared machine).
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from tltrack.bench import format_table, run_bench
+from tltrack.perf.bench import format_table, run_bench
 
 
 def main() -> None:

@@ -13,13 +13,13 @@ import argparse
 import time
 
 import numpy as np
-from tltrack.bench import run_bench
 from tltrack.config import Config, make_config
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import Setup
 from tltrack.filters.warm import warm_up
-from tltrack.messages import Measurement, Transfer
-from tltrack.tracking import PrimaryEpisode, SourceEpisode
+from tltrack.live.tracking import PrimaryEpisode, SourceEpisode
+from tltrack.perf.bench import run_bench
+from tltrack.wire.messages import Measurement, Transfer
 
 
 def pause(seconds: float, spin: bool) -> None:

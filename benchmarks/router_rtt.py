@@ -1,5 +1,5 @@
 """Do the product's routers, Zenoh in a Python process (``tltrack router``), cost latency against
-a stock Rust ``zenohd``? The routed round trip of ``bench-live`` (:mod:`tltrack.rtt`) through
+a stock Rust ``zenohd``? The routed round trip of ``bench-live`` (:mod:`tltrack.perf.rtt`) through
 each, alternated round by round, for one router and for two linked ones.
 
     make zenohd   # once: a stock zenohd on PATH
@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import shutil
 
-from tltrack import rtt
+from tltrack.perf import rtt
 
 
 def main() -> None:

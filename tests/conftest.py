@@ -1,4 +1,33 @@
+"""The test tiers, and what every test module may import from this folder.
+
+Every test carries exactly one tier mark (a collection error names any that does not):
+
+- ``unit``: one process, no router; ``make check`` runs these;
+- ``integration``: real processes over loopback Zenoh (routers, services, the CLI's live
+  commands);
+- ``system``: Docker, the built wheel, Chromium, the golden worktree.
+
+``make test`` runs all three on every core (pytest-xdist); live tests whose timing matters share
+the xdist group ``live`` so that they never run beside each other.
+"""
+
 import sys
 from pathlib import Path
 
+import pytest
+
 sys.path.insert(0, str(Path(__file__).parent))
+
+TIERS = ("unit", "integration", "system")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    wrong = []
+    for item in items:
+        tiers = [t for t in TIERS if any(m.name == t for m in item.iter_markers())]
+        if len(tiers) != 1:
+            wrong.append(f"  {item.nodeid}: {', '.join(tiers) or 'no tier'}")
+    if wrong:
+        raise pytest.UsageError(
+            f"every test carries exactly one of the marks {', '.join(TIERS)}:\n" + "\n".join(wrong)
+        )

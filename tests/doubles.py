@@ -18,15 +18,15 @@ from typing import ClassVar
 import numpy as np
 import zenoh
 from livestack import SIM_DEFAULTS
-from tltrack import keys
 from tltrack.config import make_config
 from tltrack.declare import Parameter
-from tltrack.messages import EpisodeEnd, EpisodeStart, Message, encode
+from tltrack.live.service import Service
 from tltrack.models.base import Layout
 from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.gaussian_sensor import GaussianSensor
-from tltrack.service import Service
-from tltrack.transport import Received, ZenohSettings
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, Message, encode
+from tltrack.wire.transport import Received, ZenohSettings
 
 CV_LAYOUT = ConstantVelocity.layout
 #: the paper's radar at the origin, as a transfer describes it
@@ -91,7 +91,7 @@ def kalman(model, sensor, x0, P0, zs, Rs):
 
 
 class Offline(Service):
-    """A real :class:`~tltrack.service.Service` that is never opened: it counts and rejects as
+    """A real :class:`~tltrack.live.service.Service` that is never opened: it counts and rejects as
     in a process, and keeps what it would publish."""
 
     def __init__(self, name: str, operator: str = keys.PRIMARY) -> None:

@@ -10,14 +10,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from tltrack import demo
+from tltrack.live import supervisor
 
 SIM_DEFAULTS = {"preset": "arasaratnam-haykin", "truth": "fixed", "seed": 7}
 
 
 @contextlib.contextmanager
-def stack(tmp: Path) -> Iterator[demo.Stack]:
-    s = demo.Stack(f"tcp/127.0.0.1:{demo.free_port()}", tmp / "logs")
+def stack(tmp: Path) -> Iterator[supervisor.Stack]:
+    s = supervisor.Stack(f"tcp/127.0.0.1:{supervisor.free_port()}", tmp / "logs")
     try:
         yield s
     finally:
@@ -26,7 +26,7 @@ def stack(tmp: Path) -> Iterator[demo.Stack]:
 
 
 def start_all(
-    s: demo.Stack, db: Path, *, primary_env: dict[str, str] | None = None, sim: list[str]
+    s: supervisor.Stack, db: Path, *, primary_env: dict[str, str] | None = None, sim: list[str]
 ) -> None:
     s.start_router()
     s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
@@ -37,7 +37,7 @@ def start_all(
 
 def sim_flags(steps: int, particles: int, pace: float = 0.0, **kw: Any) -> list[str]:
     o = {**SIM_DEFAULTS, **kw}
-    return demo.sim_flags(
+    return supervisor.sim_flags(
         steps, particles, pace, False, o["preset"], o["truth"], o["seed"], o.get("episodes", 1)
     )
 
@@ -57,7 +57,7 @@ def estimates(db: Path) -> dict[str, dict[int, tuple[list[float], bool]]]:
     return out
 
 
-def logs(s: demo.Stack) -> str:
+def logs(s: supervisor.Stack) -> str:
     return "\n".join(f"--- {p.name}\n{p.read_text()[-3000:]}" for p in s.logs.glob("*.log"))
 
 

@@ -18,13 +18,14 @@ from typing import Any
 
 import zenoh
 from livestack import sim_flags
-from tltrack import demo, keys
-from tltrack.demo import IDENTITY, identity_env, passwords
-from tltrack.transport import LivelinessWatcher, ZenohSettings, open_session, query
+from tltrack.live import supervisor
+from tltrack.live.supervisor import IDENTITY, identity_env, passwords
+from tltrack.wire import keys
+from tltrack.wire.transport import LivelinessWatcher, ZenohSettings, open_session, query
 
 ROOT = Path(__file__).resolve().parents[1]
-ACL = demo.ACCESS_DIR / "acl.json5"
-USERS = demo.ACCESS_DIR / "users.txt"
+ACL = supervisor.ACCESS_DIR / "acl.json5"
+USERS = supervisor.ACCESS_DIR / "users.txt"
 ROUTER_TLS_ENV = ROOT / "deploy" / "zenoh" / "router-tls.env"
 MAKE_CERTS = ROOT / "scripts" / "make_certs.sh"
 
@@ -102,7 +103,7 @@ def router_tls_env(certs: Path) -> dict[str, str]:
 
 
 def start_router(
-    s: demo.Stack, acl: Path = ACL, users: Path = USERS, env: dict[str, str] | None = None
+    s: supervisor.Stack, acl: Path = ACL, users: Path = USERS, env: dict[str, str] | None = None
 ) -> None:
     """``tltrack router`` enforcing ``acl`` with the credentials in ``users``; returns once it
     listens."""
@@ -119,13 +120,13 @@ def start_router(
     wait_for_router(s, announced + 1)
 
 
-def router_starts(s: demo.Stack) -> int:
+def router_starts(s: supervisor.Stack) -> int:
     """How many times the router of ``s`` has announced that it listens."""
     log = s.logs / "router.log"
     return log.read_text().count("listening on") if log.exists() else 0
 
 
-def wait_for_router(s: demo.Stack, starts: int, timeout: float = 30.0) -> None:
+def wait_for_router(s: supervisor.Stack, starts: int, timeout: float = 30.0) -> None:
     deadline = time.monotonic() + timeout
     while router_starts(s) < starts:
         assert s.procs["router"].poll() is None, (s.logs / "router.log").read_text()
@@ -134,14 +135,18 @@ def wait_for_router(s: demo.Stack, starts: int, timeout: float = 30.0) -> None:
 
 
 def start_service(
-    s: demo.Stack, name: str, *flags: str, users: Path = USERS, env: dict[str, str] | None = None
+    s: supervisor.Stack,
+    name: str,
+    *flags: str,
+    users: Path = USERS,
+    env: dict[str, str] | None = None,
 ) -> None:
     """A service under its operator's identity (:data:`IDENTITY`)."""
     s.start_service(name, *flags, env={**identity_env(IDENTITY[name], users), **(env or {})})
 
 
 def start_trackers_and_scorer(
-    s: demo.Stack, db: Path, users: Path = USERS, primary_env: dict[str, str] | None = None
+    s: supervisor.Stack, db: Path, users: Path = USERS, primary_env: dict[str, str] | None = None
 ) -> None:
     start_service(s, "scorer", users=users, env={"TLTRACK_SCORER_DB": str(db), **SCORER_ENV})
     start_service(s, "primary_tracker", users=users, env=primary_env)
@@ -149,7 +154,7 @@ def start_trackers_and_scorer(
 
 
 def start_sensor(
-    s: demo.Stack,
+    s: supervisor.Stack,
     steps: int,
     particles: int,
     pace: float,

@@ -5,13 +5,16 @@ would notice; only equality with the offline engine does. The shifted replay mus
 """
 
 import numpy as np
+import pytest
 from tltrack.config import make_config
 from tltrack.engine.faults import STALE_LAG
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.messages import Measurement, Transfer
-from tltrack.tracking import PrimaryEpisode, SourceEpisode
+from tltrack.live.tracking import PrimaryEpisode, SourceEpisode
+from tltrack.wire.messages import Measurement, Transfer
+
+pytestmark = pytest.mark.unit
 
 CFG = make_config(preset="arasaratnam-haykin", truth="fixed", seed=3, K=25, particles=400)
 

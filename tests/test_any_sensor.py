@@ -17,6 +17,8 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.models.base import PositionFix
 from tltrack.models.kinds import SENSORS
 
+pytestmark = pytest.mark.unit
+
 SENSOR_KINDS = SENSORS.names()
 #: every filter, robust transfer aside (it needs sensors that fix a position)
 NAMES = [f"{role}{kind}" for kind in FILTERS.names() for role in ("", "tl-", "source-")] + [

@@ -13,6 +13,8 @@ from tltrack.filters.auxiliary import AuxiliaryParticleFilter
 from tltrack.filters.auxiliary import _weighted_moments as _moments
 from tltrack.models import ConstantVelocity, Observation
 
+pytestmark = pytest.mark.unit
+
 X0 = np.array([100.0, 10.0, 100.0, 10.0])
 P0 = np.diag([50.0, 1.0, 50.0, 1.0])
 
@@ -77,7 +79,6 @@ def test_the_same_seed_gives_the_same_result_whatever_the_batch_size() -> None:
             np.testing.assert_allclose(got, want, rtol=rtol, atol=0, err_msg=name)
 
 
-@pytest.mark.slow
 def test_a_sharp_likelihood_the_bootstrap_filter_loses_and_the_rpf_keeps() -> None:
     """The paper's own parameters, N = 2000: the bootstrap source loses runs; the auxiliary
     filter, on the same data and random numbers, keeps every track within 100 m to the end."""
@@ -90,7 +91,6 @@ def test_a_sharp_likelihood_the_bootstrap_filter_loses_and_the_rpf_keeps() -> No
     assert res["tl-rpf"].rmse_overall < 25.0, res["tl-rpf"]
 
 
-@pytest.mark.slow
 def test_robust_tl_rpf_fed_by_a_source_pf_that_diverges_by_itself() -> None:
     """A bootstrap source under the paper's parameters loses its own track in some runs; the
     robust primary hears it out, keeps its own track and is no worse than the isolated rpf."""

@@ -19,11 +19,12 @@ from typing import Any
 
 import pytest
 from livestack import logs, sim_flags, stack
-from tltrack import demo, keys
+from tltrack.live import supervisor
 from tltrack.services.dashboard import launch
-from tltrack.transport import LivelinessWatcher
+from tltrack.wire import keys
+from tltrack.wire.transport import LivelinessWatcher
 
-pytestmark = pytest.mark.integration
+pytestmark = pytest.mark.system
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMEDRIVER = Path("/usr/bin/chromedriver")
@@ -108,14 +109,14 @@ def _until(pred: Callable[[], Any], timeout: float, what: str, diag: Callable[[]
 
 @pytest.mark.timeout(90, func_only=True)  # the one-off apt install is in the fixture, not here
 def test_the_page_draws_the_episode_as_it_runs(tmp_path: Path, browser: Any) -> None:
-    port = demo.free_port()
+    port = supervisor.free_port()
     with stack(tmp_path) as s:
         s.start_router()
         s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(tmp_path / "scorer.sqlite")})
         s.start_service("primary_tracker")
         s.start_service("source_tracker")
         page = launch.start(s, port)
-        with demo.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
+        with supervisor.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
             for who in launch.SIM_WAIT_FOR:  # startup is the services' business, not the page's
                 assert w.wait_until(keys.alive(*who.split(":")), True, 60), f"{who}\n{logs(s)}"
         assert launch.wait_ready(page, 10), logs(s)

@@ -2,8 +2,10 @@ import json
 import re
 
 import pytest
-from tltrack.cli import _print_table, app
+from tltrack.app.cli import _print_table, app
 from typer.testing import CliRunner
+
+pytestmark = pytest.mark.unit
 
 runner = CliRunner()
 
@@ -66,7 +68,6 @@ def test_help_has_examples():
     assert r.exit_code == 0 and "Examples" in r.output
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "name", ["robust", "sources", "budget", "heterogeneous", "presets", "intensities"]
 )
@@ -82,7 +83,6 @@ def test_each_study_writes_its_table_with_paired_differences(tmp_path, name):
         assert re.search(r"[+-]\d+\.\d{3} \(\d+\.\d{3}\)", text), text  # difference (MC error)
 
 
-@pytest.mark.slow
 def test_the_realizations_study_places_the_papers_numbers_in_its_distribution(tmp_path):
     args = ["study", "realizations", "--realizations", "3", "--runs", "2", "--particles", "200"]
     args += ["--filters", "ukf,tl-ukf", "--out", str(tmp_path)]
@@ -109,7 +109,6 @@ def test_bad_study_options_are_refused_naming_them(tmp_path, args, needle):
     assert r.exit_code == 2 and needle in r.output, r.output
 
 
-@pytest.mark.slow
 def test_the_bench_times_every_row_side_by_side(tmp_path):
     """What it measures, not how fast: every row present (Stone Soup only with its extra)."""
     out = tmp_path / "bench.json"

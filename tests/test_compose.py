@@ -36,14 +36,14 @@ import yaml
 import zenoh
 from livestack import wait_until
 from relay import captured, found, sentinels
-from tltrack import keys
 from tltrack.config import make_config
-from tltrack.demo import IDENTITY, passwords
 from tltrack.engine.scenario import measurements, truth
 from tltrack.engine.setup import Setup
-from tltrack.transport import Subscriber, ZenohSettings, open_session, query
+from tltrack.live.supervisor import IDENTITY, passwords
+from tltrack.wire import keys
+from tltrack.wire.transport import Subscriber, ZenohSettings, open_session, query
 
-pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.system, pytest.mark.timeout(900)]
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = ROOT / "compose.yaml"

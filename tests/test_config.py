@@ -3,6 +3,8 @@ import json
 import pytest
 from tltrack.config import ConfigError, load_config, make_config
 
+pytestmark = pytest.mark.unit
+
 
 def test_presets_differ_only_where_notes_say():
     paper = make_config(scenario="ct")

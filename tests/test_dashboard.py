@@ -19,9 +19,16 @@ import zenoh
 from livestack import logs, sim_flags, stack, wait_until
 from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
-from tltrack import demo, keys
 from tltrack.config import make_config
-from tltrack.messages import (
+from tltrack.live import supervisor
+from tltrack.services.dashboard import launch
+from tltrack.services.dashboard.ingest import Ingest
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.server import main
+from tltrack.services.dashboard.state import State, clean_stats
+from tltrack.services.dashboard.web import WebServer, create_app
+from tltrack.wire import keys
+from tltrack.wire.messages import (
     EpisodeStart,
     EstimateMsg,
     Message,
@@ -29,13 +36,7 @@ from tltrack.messages import (
     Truth,
     encode,
 )
-from tltrack.services.dashboard import launch
-from tltrack.services.dashboard.ingest import Ingest
-from tltrack.services.dashboard.metrics import Metrics
-from tltrack.services.dashboard.server import main
-from tltrack.services.dashboard.state import State, clean_stats
-from tltrack.services.dashboard.web import WebServer, create_app
-from tltrack.transport import LivelinessWatcher, Received
+from tltrack.wire.transport import LivelinessWatcher, Received
 
 E = "ep-r0"
 EYE = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
@@ -118,6 +119,7 @@ def get(url: str) -> tuple[int, str, bytes]:
 # ---- in-process: state, metrics, ingest -------------------------------------------------------
 
 
+@pytest.mark.unit
 def test_rmse_is_the_scorers_mean_of_position_errors_whatever_the_arrival_order():
     state, metrics, ingest, rejects = make()
     ingest.handle(received(keys.episode(E), start()))
@@ -146,6 +148,7 @@ def test_rmse_is_the_scorers_mean_of_position_errors_whatever_the_arrival_order(
     assert rejects.total == 0
 
 
+@pytest.mark.unit
 def test_replays_and_floods_stay_bounded_and_are_counted():
     state, _metrics, ingest, rejects = make()  # 2 episodes, 50 steps, 3 filters
     key = keys.primary_estimate("tl", E)
@@ -166,6 +169,7 @@ def test_replays_and_floods_stay_bounded_and_are_counted():
     assert state.snapshot("ep-b")["episode"]["id"] == "ep-b"
 
 
+@pytest.mark.unit
 def test_many_steps_are_thinned_for_the_page_keeping_the_last():
     state = State(max_points=10)
     for k in range(1, 101):
@@ -176,6 +180,7 @@ def test_many_steps_are_thinned_for_the_page_keeping_the_last():
     assert len(ep["filters"][0]["error"]) <= 11 and ep["filters"][0]["rmse"] == pytest.approx(1.0)
 
 
+@pytest.mark.unit
 def test_bad_payloads_and_statistics_are_counted_never_raised():
     state, metrics, ingest, rejects = make()
     ingest.handle(received(keys.truth(E), b"\x00\x01garbage"))
@@ -229,11 +234,12 @@ def test_bad_payloads_and_statistics_are_counted_never_raised():
     assert state.snapshot()["rejected"]["total"] == 4
 
 
+@pytest.mark.unit
 def test_the_web_app_serves_the_page_its_files_its_state_and_metrics():
     state, metrics, ingest, _ = make()
     ingest.handle(received(keys.episode(E), start()))
     ingest.handle(received(keys.truth(E), truth(1, 0.0, 0.0)))
-    port = demo.free_port()
+    port = supervisor.free_port()
     web = WebServer(create_app(state, metrics), "127.0.0.1", port)
     web.start()
     try:
@@ -263,6 +269,7 @@ def test_the_web_app_serves_the_page_its_files_its_state_and_metrics():
     assert not web.running
 
 
+@pytest.mark.unit
 def test_bad_settings_stop_the_dashboard_naming_the_field(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--port=70000"])
@@ -270,6 +277,7 @@ def test_bad_settings_stop_the_dashboard_naming_the_field(capsys):
     assert "port" in capsys.readouterr().err
 
 
+@pytest.mark.unit
 def test_sensor_sim_can_wait_for_the_dashboard_too():
     from tltrack.services.sensor_sim.simulator import Settings as SimSettings
 
@@ -300,11 +308,11 @@ GARBAGE = [
 ]
 
 
-@pytest.mark.integration
 @pytest.mark.timeout(90)
+@pytest.mark.integration
 def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it(tmp_path):
     K = 30
-    port = demo.free_port()
+    port = supervisor.free_port()
     page = launch.url(port)
 
     def state() -> dict[str, Any]:
@@ -330,7 +338,7 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
         s.start_service("primary_tracker", env={"TLTRACK_PRIMARY_LOCKSTEP": "true"})
         s.start_service("source_tracker")
         launch.start(s, port)
-        with demo.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
+        with supervisor.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
             for who in launch.SIM_WAIT_FOR:
                 assert w.wait_until(keys.alive(*who.split(":")), True, 60), logs(s)
             for payload in GARBAGE:
@@ -338,12 +346,12 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
                 session.put(keys.primary_meas(E), payload)
         s.start_service("sensor_sim", *sim_flags(K, 500, pace=0), env=launch.sim_env())
         assert s.wait("sensor_sim", 60) == 0, logs(s)
-        assert demo.wait_for_scored(s.endpoint, 1, 30) is not None, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 30) is not None, logs(s)
         assert wait_until(settled, 15), f"{state()}\n{logs(s)}"
 
         def scorer_has_all() -> dict[str, Any] | None:
             # the scorer may call an episode scored before a lagging primary's last estimate
-            summary = demo.fetch_summary(s.endpoint) or {}
+            summary = supervisor.fetch_summary(s.endpoint) or {}
             filters = summary.get("filters", {})
             done = len(filters) == 3 and all(f["steps"] == K for f in filters.values())
             return summary if done else None
@@ -392,8 +400,8 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
     assert snap["rejected"]["total"] >= 3 * len(GARBAGE)
 
 
-@pytest.mark.integration
 @pytest.mark.timeout(60)
+@pytest.mark.integration
 def test_a_taken_port_stops_the_dashboard_at_once_with_the_reason(tmp_path):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))

@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 from livestack import wait_until
 from test_compose import ROOT, _clean_env, _remove_leftovers, _run, compose, image  # noqa: F401
-from tltrack.cli import app
+from tltrack.app.cli import app
 from tltrack.config import Config, make_config
 from tltrack.engine import cluster
 from tltrack.engine.montecarlo import FilterResult, run_experiment
@@ -66,6 +66,7 @@ def same(a: dict[str, Any], b: dict[str, Any]) -> None:
 # ---- no cluster needed ---------------------------------------------------------------------------
 
 
+@pytest.mark.unit
 def test_scheduler_comes_from_the_option_else_the_environment(monkeypatch):
     monkeypatch.delenv(cluster.ENV, raising=False)
     assert cluster.address(None) is None
@@ -78,6 +79,7 @@ def test_scheduler_comes_from_the_option_else_the_environment(monkeypatch):
 
 
 @pytest.mark.parametrize("command", [["experiment"], ["reproduce"], ["study", "robust"]])
+@pytest.mark.unit
 def test_workers_with_a_scheduler_is_refused_saying_why(tmp_path, monkeypatch, command):
     monkeypatch.delenv(cluster.ENV, raising=False)
     runner = CliRunner()
@@ -91,6 +93,7 @@ def test_workers_with_a_scheduler_is_refused_saying_why(tmp_path, monkeypatch, c
     assert not any(tmp_path.iterdir())  # refused before anything ran
 
 
+@pytest.mark.unit
 def test_every_engine_command_takes_scheduler_workers_and_batch_size():
     runner = CliRunner()
     for command in (["experiment"], ["reproduce"], ["study"]):
@@ -119,6 +122,7 @@ class LastFirst(Executor):
             time.sleep(0.05)
 
 
+@pytest.mark.unit
 def test_batches_merge_in_batch_order_whatever_order_they_complete_in():
     cfg = small(runs=7).with_(K=15, particles=300)
     heard: list[int] = []
@@ -267,7 +271,6 @@ def reference() -> dict[str, FilterResult]:
 
 
 @pytest.mark.integration
-@pytest.mark.slow
 def test_scheduler_gives_the_local_pools_results_with_batches_on_both_workers(
     two_workers, reference, tmp_path
 ):
@@ -310,7 +313,6 @@ def test_scheduler_gives_the_local_pools_results_with_batches_on_both_workers(
 
 
 @pytest.mark.integration
-@pytest.mark.slow
 def test_a_worker_killed_mid_sweep_costs_only_its_batches(two_workers, reference):
     """Only B's batches run again: those it was running, and those it had finished whose
     results still lived in its memory (the client had not gathered them yet)."""
@@ -359,9 +361,8 @@ def lone_worker(tmp_path: Path) -> Iterator[Cluster]:
         c.stop(seen)
 
 
-@pytest.mark.integration
-@pytest.mark.slow
 @pytest.mark.parametrize("how", ["SIGKILL", "SIGSTOP"])
+@pytest.mark.integration
 def test_a_scheduler_that_dies_or_hangs_mid_sweep_fails_the_sweep_within_30_s(lone_worker, how):
     """Killed, the client's connection closes; stopped (it holds its connections but answers
     nothing), the watchdog's ping goes unanswered."""
@@ -390,7 +391,6 @@ def _silent_listener() -> socket.socket:
 
 
 @pytest.mark.integration
-@pytest.mark.slow
 def test_a_scheduler_that_does_not_answer_gives_a_clear_error_within_30_s(tmp_path):
     with socket.socket() as free:
         free.bind(("127.0.0.1", 0))
@@ -451,15 +451,14 @@ def mc_cluster(compose: list[str], image: str) -> Iterator[Mc]:  # noqa: F811
         assert down.returncode == 0 and not left, (down.stderr[-3000:], left)
 
 
-@pytest.mark.docker
-@pytest.mark.slow
 @pytest.mark.timeout(900)
+@pytest.mark.system
 def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_cluster, tmp_path):
     """A small `tltrack reproduce --table2-pf-only` against the profile's scheduler, from a
     client container on the cluster's network and from the host through the loopback port;
     both equal the local pool's results."""
     from distributed import Client
-    from tltrack import reproduce as rep
+    from tltrack.studies import reproduce as rep
 
     run, address = mc_cluster.run, mc_cluster.address
     cluster.probe(address, 60)  # Docker publishes the port before the scheduler listens

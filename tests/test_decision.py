@@ -1,10 +1,13 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import run_batch
 from tltrack.filters.decision import TransferPolicy, disagreement, nis
 from tltrack.models import CoordinatedTurn, Observation, RangeBearing
+
+pytestmark = pytest.mark.unit
 
 S = RangeBearing(10.0, np.sqrt(10) * 1e-3, CoordinatedTurn.layout)
 R_p, R_s = S.R(4.0), S.R(1.0)

@@ -143,7 +143,7 @@ def test_sigterm_to_bench_live_stops_every_process_it_started(tmp_path: Path) ->
 
 
 def _free_port() -> int:
-    from tltrack.demo import free_port
+    from tltrack.live.supervisor import free_port
 
     return free_port()
 
@@ -172,7 +172,7 @@ def test_a_service_waiting_for_a_router_that_is_not_there_stops_on_a_signal(
 ) -> None:
     """A service blocks in zenoh.open until its router answers (connect timeout -1); a stop
     signal must still end it, as the router may be gone for good (found as orphans in a futex)."""
-    from tltrack.topology import free_port
+    from tltrack.live.topology import free_port
 
     env = {
         **os.environ,
@@ -212,7 +212,7 @@ def test_a_process_whose_close_never_ends_still_ends_soon_after_a_stop_signal(
     close: str, rc: int
 ) -> None:
     """The bound behind the 10 s above: a close stuck past the grace period ends the process."""
-    code = f"from tltrack.transport import exit_unless_stopped as x\nx(15, 0.5)\n{close}"
+    code = f"from tltrack.wire.transport import exit_unless_stopped as x\nx(15, 0.5)\n{close}"
     t0 = time.monotonic()
     assert subprocess.run([sys.executable, "-c", code], timeout=20).returncode == rc
     assert time.monotonic() - t0 < 15

@@ -9,6 +9,8 @@ from tltrack.engine.scenario import simulate, truth
 from tltrack.engine.setup import Setup
 from tltrack.filters.kernels.moments import spread_coordinates
 
+pytestmark = pytest.mark.unit
+
 FILTERS = ["pf", "tl-pf", "ukf", "tl-ckf5", "fusion-pf"]
 
 

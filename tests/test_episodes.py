@@ -1,18 +1,21 @@
-"""tltrack.tracking.Episodes, the table of episodes every live service keeps: a sample that
+"""tltrack.live.tracking.Episodes, the table of episodes every live service keeps: a sample that
 overtakes its episode's start is held and handled once it opens; one of an episode closed here
 (declined, retired or evicted) is counted at once, never held; one whose episode never starts is
-counted once it has waited too long (tltrack.held)."""
+counted once it has waited too long (tltrack.live.held)."""
 
 from __future__ import annotations
 
 import time
 
+import pytest
 from doubles import episode_end, episode_start, received
-from tltrack import keys
 from tltrack.config import Config
-from tltrack.held import Held
-from tltrack.messages import EpisodeStart, RejectCounter
-from tltrack.tracking import Episodes
+from tltrack.live.held import Held
+from tltrack.live.tracking import Episodes
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, RejectCounter
+
+pytestmark = pytest.mark.unit
 
 K = 3
 

@@ -30,6 +30,8 @@ from tltrack.filters.resampling import systematic_indices, systematic_walk
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models import ConstantVelocity, CoordinatedTurn, Observation, RangeBearing
 
+pytestmark = pytest.mark.unit
+
 
 class SlowCT(CoordinatedTurn):
     """The same model under another type: the filter takes its generic NumPy path."""

@@ -35,10 +35,11 @@ from security_helpers import (
     wait_for_router,
     wait_for_scored,
 )
-from tltrack import demo, keys
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
-from tltrack.transport import LivelinessWatcher
+from tltrack.live import supervisor
+from tltrack.wire import keys
+from tltrack.wire.transport import LivelinessWatcher
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 
@@ -91,7 +92,7 @@ def assert_genuine(
                 )
 
 
-def start(s: demo.Stack, db: Path, K: int, **primary: str) -> None:
+def start(s: supervisor.Stack, db: Path, K: int, **primary: str) -> None:
     """Router, trackers and scorer under their identities, then one episode of run FIRST_RUN."""
     start_router(s)
     env = {f"TLTRACK_PRIMARY_{k.upper()}": v for k, v in primary.items()}
@@ -99,7 +100,7 @@ def start(s: demo.Stack, db: Path, K: int, **primary: str) -> None:
     start_sensor(s, K, N, pace=PACE, first_run=FIRST_RUN)
 
 
-def next_episode(s: demo.Stack, K: int, back: list[str]) -> None:
+def next_episode(s: supervisor.Stack, K: int, back: list[str]) -> None:
     """Once the first episode is over and ``back`` are alive again, the operators' next one."""
     assert s.wait("sensor_sim", 120) == 0, logs(s)
     with session(s.endpoint, "referee") as z:
@@ -125,7 +126,7 @@ class TokenClock:
         self._session.close()
 
 
-def primary_saw_source_back(s: demo.Stack, after: float) -> float:
+def primary_saw_source_back(s: supervisor.Stack, after: float) -> float:
     """When the primary logged its source alive again after ``after``, or infinity.
 
     The primary's router may hear the restarted source's token before the referee's does; a step
@@ -140,7 +141,7 @@ def primary_saw_source_back(s: demo.Stack, after: float) -> float:
     return min(seen, default=math.inf)
 
 
-def kill_and_restart_source(s: demo.Stack, db: Path, at: int) -> tuple[float, TokenClock]:
+def kill_and_restart_source(s: supervisor.Stack, db: Path, at: int) -> tuple[float, TokenClock]:
     """kill -9 the source tracker once the primary has taken step ``at``; restart it at once."""
     assert wait_until(lambda: latest(db, E1, "tl-rpf") >= at, 90), logs(s)
     clock = TokenClock(s.endpoint)

@@ -21,12 +21,13 @@ import pytest
 from livestack import estimates, logs, sim_flags, wait_until
 from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
-from tltrack import demo, keys, topology
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import measurements, truth
 from tltrack.engine.setup import Setup
-from tltrack.transport import Publisher, Subscriber
+from tltrack.live import supervisor, topology
+from tltrack.wire import keys
+from tltrack.wire.transport import Publisher, Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -43,7 +44,7 @@ def config(steps: int = K) -> Config:
 @contextlib.contextmanager
 def federation(
     tmp: Path, lag_s: dict[tuple[str, str], float] | None = None
-) -> Iterator[tuple[demo.Stack, dict[tuple[str, str], Relay]]]:
+) -> Iterator[tuple[supervisor.Stack, dict[tuple[str, str], Relay]]]:
     """A federated stack whose routers dial each other through relays (not yet started);
     ``lag_s``: links slow towards their dialler."""
     topo = topology.federated(["s1"])
@@ -56,7 +57,9 @@ def federation(
             for link in LINKS
         }
         topo = dataclasses.replace(topo, via={link: r.endpoint for link, r in relays.items()})
-        s = stack.enter_context(demo.Stack(topo.referee.endpoint, tmp / "logs", topology=topo))
+        s = stack.enter_context(
+            supervisor.Stack(topo.referee.endpoint, tmp / "logs", topology=topo)
+        )
         yield s, relays
 
 
@@ -64,7 +67,7 @@ def federation(
 LIVE = ("tl-rpf", "rpf", "source-rpf")
 
 
-def every_step(db: Path, s: demo.Stack) -> dict[str, dict[int, tuple[list[float], bool]]]:
+def every_step(db: Path, s: supervisor.Stack) -> dict[str, dict[int, tuple[list[float], bool]]]:
     """The scorer's record of the episode, which must hold every step of every filter."""
     live = estimates(db)
     steps = {name: sorted(live.get(name, {})) for name in LIVE}
@@ -73,7 +76,7 @@ def every_step(db: Path, s: demo.Stack) -> dict[str, dict[int, tuple[list[float]
 
 
 def run_episode(
-    s: demo.Stack,
+    s: supervisor.Stack,
     db: Path,
     steps: int,
     pace: float,
@@ -116,7 +119,7 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
             sensor_env={"s1": {"TLTRACK_ZENOH_ENDPOINTS": json.dumps([tap.endpoint])}},
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         live = every_step(db, s)
         wire = {link: r.bytes() for link, r in relays.items()}
         local = tap.bytes()
@@ -153,12 +156,12 @@ def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything
             acl = {"TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(open_acl)}
             s.start_operator_router(r.operator, acl if r.operator == "primary" else None)
         with (
-            demo.client(topo.routers["primary"].endpoint, "primary") as z,
+            supervisor.client(topo.routers["primary"].endpoint, "primary") as z,
             Subscriber(z, [keys.ALL, "tltrack/source/s1/meas/*"]) as sub,
         ):
             run_episode(s, db, K, 0.0)
             assert s.wait("sensor_sim", 120) == 0, logs(s)
-            assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+            assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
             got = [item.key for item in sub.drain()]
         wire = relays["source/s1", "primary"].bytes()
     cfg = config()
@@ -177,7 +180,7 @@ def test_a_slow_link_costs_no_transfer(tmp_path):
         s.start_router()
         run_episode(s, db, K, 0.0, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"})
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         live = every_step(db, s)
     assert all(live["tl-rpf"][k][1] for k in range(2, K + 1)), live["tl-rpf"]
 
@@ -222,7 +225,7 @@ def test_faults_between_routers(tmp_path, fault):
             s.start_operator_router("primary")
         back = max(_transfer_use(db), default=hit)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
     used = _transfer_use(db)
     assert all(used[k] for k in range(2, hit - 1)), "transfer unused before the fault"
     during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
@@ -255,7 +258,7 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
     certificate from the operators' CA (episodes flow) or from another CA (refused)."""
     certs = make_certs(tmp_path / "certs", names="sensor router-primary")
     rogue = make_certs(tmp_path / "rogue", names="router-primary")
-    port = demo.free_port()
+    port = supervisor.free_port()
     topo = dataclasses.replace(
         topology.federated([]),
         via={("primary", keys.REFEREE): f"tls/localhost:{port}"},
@@ -263,7 +266,7 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
     ref = dataclasses.replace(topo.referee, endpoint=f"tls/127.0.0.1:{port}")
     topo = dataclasses.replace(topo, routers={**topo.routers, keys.REFEREE: ref})
     signer = certs if issuer == "operators-ca" else rogue
-    with demo.Stack(topo.referee.endpoint, tmp_path / "logs", topology=topo) as s:
+    with supervisor.Stack(topo.referee.endpoint, tmp_path / "logs", topology=topo) as s:
         for r in topo.routers.values():
             cert = certs / "router.pem" if r is ref else signer / "router-primary.pem"
             s.start_operator_router(r.operator, _tls_env(certs / "ca.pem", cert))
@@ -275,7 +278,7 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
         }
         with (
             session(f"tls/localhost:{port}", "sensor", connect_timeout_ms=20_000, **tls) as ref_z,
-            demo.client(topo.routers["primary"].endpoint, "primary") as prim_z,
+            supervisor.client(topo.routers["primary"].endpoint, "primary") as prim_z,
             Subscriber(prim_z, keys.EPISODES) as episodes,
             Publisher(ref_z, keys.episode("e1")) as pub,
         ):
@@ -315,7 +318,7 @@ def test_each_operators_sensor_replays_its_own_rows(tmp_path):
             sensor_env={sid: {"TLTRACK_SENSOR_REPLAY_CSV": str(p)} for sid, p in replays.items()},
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert demo.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         for sid in ("primary", "s1"):
             assert "replaying" in (s.logs / f"sensor_{sid}.log").read_text(), logs(s)
         live = every_step(db, s)

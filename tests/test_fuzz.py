@@ -3,7 +3,7 @@ beside the genuine stream of a lock-step episode.
 
 The payloads come from one generator of malformations (:func:`malformed`), driven by a seeded
 ``random.Random`` for the live flood and by hypothesis for the handlers in-process, where
-failures shrink. A payload is kept only if :func:`tltrack.messages.decode` refuses it, so every
+failures shrink. A payload is kept only if :func:`tltrack.wire.messages.decode` refuses it, so every
 one must be counted exactly once by every service that receives it; messages that decode but
 name a past, far-future or already-seen step are added live, where the trackers' step windows
 refuse them.
@@ -41,10 +41,14 @@ from security_helpers import (
     wait_alive,
     wait_for_scored,
 )
-from tltrack import keys
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
-from tltrack.messages import (
+from tltrack.services.primary_tracker import tracker as primary_svc
+from tltrack.services.scorer import scorer as scorer_svc
+from tltrack.services.scorer.store import Store
+from tltrack.services.source_tracker import tracker as source_svc
+from tltrack.wire import keys
+from tltrack.wire.messages import (
     MAX_K,
     MAX_PAYLOAD_BYTES,
     EpisodeEnd,
@@ -58,11 +62,7 @@ from tltrack.messages import (
     decode,
     encode,
 )
-from tltrack.services.primary_tracker import tracker as primary_svc
-from tltrack.services.scorer import scorer as scorer_svc
-from tltrack.services.scorer.store import Store
-from tltrack.services.source_tracker import tracker as source_svc
-from tltrack.transport import Subscriber
+from tltrack.wire.transport import Subscriber
 
 E = "ep-r0"
 T0 = 1.8e9
@@ -345,6 +345,7 @@ def handlers(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Any, O
     max_examples=400, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(kind=st.sampled_from(KINDS), rnd=st.randoms(use_true_random=False), data=st.data())
+@pytest.mark.unit
 def test_each_handler_counts_every_malformed_payload_once(
     handlers: dict[str, tuple[Any, Offline]], kind: str, rnd: random.Random, data: st.DataObject
 ) -> None:
@@ -363,6 +364,7 @@ def test_each_handler_counts_every_malformed_payload_once(
 # Gaps this file found in the services, now closed: each test pins its fix.
 
 
+@pytest.mark.unit
 def test_a_replayed_episode_start_is_counted_as_a_duplicate(tmp_path: Path) -> None:
     start = received(keys.episode(E), encode(_template("episode")))
     for name, (handler, svc) in _handlers(tmp_path).items():
@@ -370,6 +372,7 @@ def test_a_replayed_episode_start_is_counted_as_a_duplicate(tmp_path: Path) -> N
         assert svc.rejects.count(reason="duplicate") == 1, name
 
 
+@pytest.mark.unit
 def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
     """Held unread, 64 samples of 4 unknown episodes may be anything up to zenoh's 1 GiB limit
     (measured: 20 x 50 MB kept 1 GB in the primary); refused at once, they cost nothing."""
@@ -385,6 +388,7 @@ def test_a_sample_held_for_its_episode_is_checked_first(tmp_path: Path) -> None:
         assert svc.rejects.count(reason="not_msgpack") == 1, name
 
 
+@pytest.mark.unit
 def test_the_scorer_refuses_replays_steps_beyond_k_wrong_keys_and_senders(tmp_path: Path) -> None:
     scorer, svc = _handlers(tmp_path)["scorer"]
     truth, est = _template("truth"), _template("estimate")
@@ -413,6 +417,7 @@ def test_the_scorer_refuses_replays_steps_beyond_k_wrong_keys_and_senders(tmp_pa
     assert scorer.store.rows("SELECT count(*) FROM estimates") == [(1,)]
 
 
+@pytest.mark.unit
 def test_the_scorer_holds_what_overtakes_its_episode_start(tmp_path: Path) -> None:
     """Zenoh orders samples per key only: the truth and an estimate of an episode can arrive
     before its start. They are kept, and stored once it starts; none is counted as refused."""
@@ -437,6 +442,7 @@ def test_the_scorer_holds_what_overtakes_its_episode_start(tmp_path: Path) -> No
     assert svc.rejects.total == 0
 
 
+@pytest.mark.unit
 def test_the_scorer_counts_what_waits_for_an_episode_that_never_starts(tmp_path: Path) -> None:
     """The hold is bounded: 64 samples an episode, 4 episodes. A 65th sample, and the samples of
     the oldest episode once a 5th waits, are counted as unknown_episode, and none is stored."""
@@ -570,8 +576,8 @@ def _rss_sampler(
     return peak, run
 
 
-@pytest.mark.integration
 @pytest.mark.timeout(180)
+@pytest.mark.integration
 def test_services_survive_a_flood_of_bad_input_beside_a_lockstep_episode(tmp_path: Path) -> None:
     """Over 10 000 bad payloads per service and one of 100 MB, through the router as deployed
     (BLOCK, so none is lost on the way): every service lives, counts each one in the scorer's

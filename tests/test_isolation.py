@@ -38,11 +38,12 @@ from security_helpers import (
     summary,
     wait_for_scored,
 )
-from tltrack import demo, keys
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
-from tltrack.messages import EpisodeStart, Transfer, decode, encode
-from tltrack.transport import Subscriber
+from tltrack.live import supervisor
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, Transfer, decode, encode
+from tltrack.wire.transport import Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(170)]
 needs_openssl = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs openssl")
@@ -209,7 +210,7 @@ def test_mutual_tls_episode_with_operator_certificates(tmp_path: Path) -> None:
     assert ROUTER_TLS_ENV.exists()
     certs = make_certs(tmp_path / "certs")
     rogue = make_certs(tmp_path / "rogue", names="primary")
-    port = demo.free_port()
+    port = supervisor.free_port()
     db = tmp_path / "scorer.sqlite"
     with stack(tmp_path) as s:
         s.endpoint = f"tls/localhost:{port}"
@@ -226,7 +227,7 @@ def test_mutual_tls_episode_with_operator_certificates(tmp_path: Path) -> None:
             if name == "sensor_sim":
                 s.start_service(
                     name,
-                    *demo.sim_flags(15, 300, 0, False, "arasaratnam-haykin", "fixed", 7),
+                    *supervisor.sim_flags(15, 300, 0, False, "arasaratnam-haykin", "fixed", 7),
                     env=env,
                 )
             else:
@@ -292,7 +293,7 @@ def _tap(target_port: int) -> Iterator[tuple[int, bytearray]]:
 def test_an_eavesdropper_reads_plain_tcp_but_not_tls(tmp_path: Path, tls: bool) -> None:
     secret = b"eta=1234.5678 rad; raw range of the source"
     certs = make_certs(tmp_path / "certs", names="primary source-s1")
-    port = demo.free_port()
+    port = supervisor.free_port()
     proto = "tls" if tls else "tcp"
     with stack(tmp_path) as s:
         s.endpoint = f"{proto}/127.0.0.1:{port}"

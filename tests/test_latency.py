@@ -1,11 +1,13 @@
-"""The latency's stages (tltrack.latency): they add up to the end-to-end latency, and an estimate
-whose tracker did not time its stages has none."""
+"""The latency's stages (tltrack.live.latency): they add up to the end-to-end latency, and an
+estimate whose tracker did not time its stages has none."""
 
 from __future__ import annotations
 
 import pytest
-from tltrack import latency
-from tltrack.messages import EstimateMsg
+from tltrack.live import latency
+from tltrack.wire.messages import EstimateMsg
+
+pytestmark = pytest.mark.unit
 
 T0 = 1_700_000_000.0
 P = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]

@@ -7,7 +7,7 @@ import shutil
 from typing import Any
 
 import pytest
-from tltrack import livebench, rtt
+from tltrack.perf import livebench, rtt
 
 
 def _summary(steps: int, p99: float, filters: int = 3) -> dict[str, Any]:
@@ -29,12 +29,14 @@ def _summary(steps: int, p99: float, filters: int = 3) -> dict[str, Any]:
         ({}, False),  # the episode failed
     ],
 )
+@pytest.mark.unit
 def test_a_rate_is_sustained_only_with_every_estimate_and_p99_under_five_periods(
     summary: dict[str, Any], sustained: bool
 ) -> None:
     assert livebench.sustained(summary, 5000, period_ms=1.0) is sustained
 
 
+@pytest.mark.unit
 def test_the_limit_is_the_round_trip_plus_the_tl_step() -> None:
     run: dict[str, Any] = {
         "filter": "rpf",
@@ -53,29 +55,31 @@ def test_the_limit_is_the_round_trip_plus_the_tl_step() -> None:
     assert "live_step_ms" not in run
 
 
+@pytest.mark.unit
 def test_a_failed_episode_has_no_ratio() -> None:
     run: dict[str, Any] = {"filter": "pf", "latency_ms": None, "live_step_ms": {}}
     livebench.limit(run, {"p50": 0.5, "p99": 0.9}, {})
     assert run["ratio"] is None and run["tl_step_ms"] is None and run["step_ms"] == {}
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize("kind", ["single", "federated"])
+@pytest.mark.integration
 def test_the_round_trip_goes_through_real_routers_to_another_process(kind: str) -> None:
     got = rtt.measure(kind, samples=200, warmup=20)
     assert 0 < got["p50"] <= got["p99"] < 2000  # every pong came back, within its 2 s wait
 
 
-@pytest.mark.integration
 @pytest.mark.skipif(
     shutil.which("zenohd") is None,
     reason="no zenohd on PATH (make zenohd builds it with cargo, ~7.5 min)",
 )
+@pytest.mark.unit
 def test_the_round_trip_goes_through_stock_zenohd_routers_too() -> None:
     got = rtt.measure("federated", samples=200, warmup=20, zenohd=True)
     assert 0 < got["p50"] <= got["p99"] < 2000
 
 
+@pytest.mark.unit
 def test_a_rung_says_why_it_failed() -> None:
     got = livebench.rung(_summary(4990, 61.0), 5000)
     missing = {"tl-rpf": 10, "rpf": 10, "source-rpf": 10}

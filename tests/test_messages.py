@@ -14,7 +14,7 @@ from doubles import RADAR
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from tltrack.config import make_config
-from tltrack.messages import (
+from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
     REASONS,
@@ -35,7 +35,7 @@ from tltrack.messages import (
 
 V = SCHEMA_VERSION
 
-pytestmark = pytest.mark.timeout(60)
+pytestmark = [pytest.mark.unit, pytest.mark.timeout(60)]
 
 T0 = 1_700_000_000.0
 COMMON: dict[str, Any] = {"episode": "ep-1", "sender": "s1", "t_sensor": T0}

@@ -25,6 +25,8 @@ from tltrack.models import (
     RangeBearing,
 )
 
+pytestmark = pytest.mark.unit
+
 CFG = make_config(scenario="cv", particles=2000)
 X0 = np.array(CFG.x0)
 P0 = np.diag(CFG.P0_diag)

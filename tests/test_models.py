@@ -4,6 +4,8 @@ from tltrack.config import make_config
 from tltrack.engine.setup import Setup
 from tltrack.models import CoordinatedTurn, RangeBearing, wrap_angle
 
+pytestmark = pytest.mark.unit
+
 
 def test_wrap_angle_lands_in_half_open_interval():
     a = np.array([np.pi, -np.pi, 3 * np.pi, 0.1 - 2 * np.pi, 7.0])

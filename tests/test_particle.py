@@ -1,9 +1,12 @@
 import numpy as np
+import pytest
 from doubles import PositionSensor, cv_model, kalman
 from tltrack.engine.streams import streams
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.resampling import systematic_indices
 from tltrack.models.observation import Observation
+
+pytestmark = pytest.mark.unit
 
 R = np.diag([25.0, 25.0])
 P0 = np.diag([50.0, 1.0, 50.0, 1.0])

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from doubles import PositionSensor
 from tltrack.config import make_config
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import Setup
 from tltrack.models import ConstantVelocity, CoordinatedTurn, RangeBearing
+
+pytestmark = pytest.mark.unit
 
 
 def test_linear_gaussian_bound_is_the_kalman_covariance() -> None:

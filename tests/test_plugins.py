@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 from doubles import Offline, episode_start, received
 from livestack import estimates
-from tltrack import keys
 from tltrack.config import Config, SensorSpec, SourceSpec, load_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.filters.kinds import FILTERS
-from tltrack.messages import Transfer, encode
 from tltrack.models.kinds import MOTIONS, SENSORS
 from tltrack.services.primary_tracker import tracker as primary_svc
+from tltrack.wire import keys
+from tltrack.wire.messages import Transfer, encode
 
 ROOT = Path(__file__).resolve().parents[1]
 RANGE_ONLY = ROOT / "examples" / "range_only"
@@ -70,7 +70,7 @@ def test_a_message_naming_an_unknown_kind_is_refused_counted_and_imports_nothing
     cfg = Config.model_validate({}).model_dump(mode="json")
     cfg["sources"][0]["sensor"] = {"kind": "booby_trap:Evil"}
     start = json.loads(json.dumps({"config": cfg}))["config"]
-    from tltrack.messages import EpisodeStart
+    from tltrack.wire.messages import EpisodeStart
 
     bad = EpisodeStart.model_construct(
         schema_version=2, type="episode_start", episode="e2", sender="sensor_sim", k=0,

@@ -8,31 +8,29 @@ from pathlib import Path
 import numpy as np
 import pytest
 from tltrack.config import ConfigError, make_config
+from tltrack.config.load import complete_from_truth_file, load_config
+from tltrack.config.truth_file import StateLayout, TruthFileError, file_truth
 from tltrack.engine.montecarlo import run_batch
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import Setup
-from tltrack.engine.truth_file import (
-    STATE_LAYOUTS,
-    TruthFileError,
-    configure,
-    experiment_config,
-    file_truth,
-)
 from tltrack.filters.kinds import FILTERS
+from tltrack.models.kinds import MOTIONS
 from typer.testing import CliRunner
+
+pytestmark = pytest.mark.unit
 
 TRACK = Path(__file__).resolve().parents[1] / "examples" / "tracks"
 SHIP = next(TRACK.glob("*.csv"))
 
 
 def test_a_truth_file_sets_the_truth_mode_k_and_x0() -> None:
-    cfg = experiment_config(None, truth_file=SHIP)
+    cfg = load_config(None, truth_file=SHIP)
     assert cfg.truth == "file" and cfg.K > 2000
     x = truth(Setup(cfg), 0)
     assert x.shape == (cfg.K + 1, 5)
     np.testing.assert_allclose(x[0], cfg.x0)
     np.testing.assert_array_equal(truth(Setup(cfg), 7), x)  # one track for every run
-    shorter = experiment_config(None, truth_file=SHIP, K=50)
+    shorter = load_config(None, truth_file=SHIP, K=50)
     np.testing.assert_array_equal(truth(Setup(shorter), 0), x[:51])
 
 
@@ -40,19 +38,21 @@ def test_a_truth_mode_and_a_truth_file_together_are_refused() -> None:
     with pytest.raises(ConfigError, match="either truth_file or truth"):
         make_config(truth_file=SHIP, truth="random")
     with pytest.raises(ConfigError, match="either truth_file or truth"):
-        configure({"truth_file": SHIP, "truth": "fixed"})
+        complete_from_truth_file({"truth_file": SHIP, "truth": "fixed"})
 
 
 def test_k_may_only_shorten_the_track() -> None:
     with pytest.raises(TruthFileError, match="longer than the track"):
-        configure({"truth_file": SHIP, "K": 100_000})
+        complete_from_truth_file({"truth_file": SHIP, "K": 100_000})
 
 
 def test_a_sensor_on_the_track_is_refused_naming_it_and_the_step() -> None:
-    cfg = experiment_config(None, truth_file=SHIP)
+    cfg = load_config(None, truth_file=SHIP)
     x, y = truth(Setup(cfg), 0)[40, [0, 2]]
     with pytest.raises(TruthFileError, match=r"s1.*step"):
-        configure({"truth_file": SHIP, "sources": [{"id": "s1", "position": [x + 30, y]}]})
+        complete_from_truth_file(
+            {"truth_file": SHIP, "sources": [{"id": "s1", "position": [x + 30, y]}]}
+        )
 
 
 def test_a_config_not_completed_from_its_file_is_refused_by_the_engine() -> None:
@@ -62,14 +62,16 @@ def test_a_config_not_completed_from_its_file_is_refused_by_the_engine() -> None
 
 
 def test_the_truth_files_layouts_are_the_motion_models() -> None:
-    for scenario, lay in STATE_LAYOUTS.items():
+    for scenario in MOTIONS.names():
+        lay = StateLayout.of(MOTIONS.get(scenario).components)
         model = Setup(make_config(scenario=scenario)).motion
         assert (lay.n, lay.pos, lay.vel) == (model.n, model.layout.pos, model.layout.vel)
+    assert StateLayout.of(MOTIONS.get("ct").components).turn_rate == 4
 
 
 @pytest.mark.parametrize("scenario", ["cv", "ct", "ca"])
 def test_every_filter_kind_runs_on_the_shipped_track(scenario: str) -> None:
-    cfg = experiment_config(None, truth_file=SHIP, scenario=scenario, K=60, particles=200)
+    cfg = load_config(None, truth_file=SHIP, scenario=scenario, K=60, particles=200)
     names = [f"{r}{k}" for k in FILTERS.names() for r in ("", "tl-")]
     stats = run_batch(cfg, names, [0, 1])
     for name in names:  # runs, and stays in the picture (a bootstrap PF with N = 200 may drift)
@@ -78,7 +80,7 @@ def test_every_filter_kind_runs_on_the_shipped_track(scenario: str) -> None:
 
 
 def test_the_cli_records_the_file_and_its_hash(tmp_path: Path) -> None:
-    from tltrack.cli import app
+    from tltrack.app.cli import app
 
     out = tmp_path / "e"
     argv = ["experiment", "--truth-file", str(SHIP), "--filters", "ukf,tl-ukf", "--runs", "2"]

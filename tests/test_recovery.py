@@ -10,6 +10,8 @@ from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.recovery import Recovery
 from tltrack.models import Observation, RangeBearing
 
+pytestmark = pytest.mark.unit
+
 CFG = make_config(preset="arasaratnam-haykin")
 
 

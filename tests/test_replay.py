@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from tltrack.config import make_config
 from tltrack.engine.setup import Setup
-from tltrack.replay import ReplayError, load
+from tltrack.live.replay import ReplayError, load
+
+pytestmark = pytest.mark.unit
 
 CFG = make_config(
     primary_sensor={"kind": "bearing"},

@@ -1,8 +1,8 @@
 import pytest
-from tltrack.cli import app
+from tltrack.app.cli import app
 from typer.testing import CliRunner
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.unit
 
 
 def test_reproduce_writes_every_table_and_figure(tmp_path):
@@ -30,9 +30,9 @@ def test_reproduce_writes_every_table_and_figure(tmp_path):
 
 
 def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
-    from tltrack import reproduce as rep
     from tltrack.config import make_config
     from tltrack.engine.montecarlo import run_experiment
+    from tltrack.studies import reproduce as rep
 
     base = rep.base_config("arasaratnam-haykin", "noise-free", runs=3, seed=1)
     groups = rep.sweeps(rep.jobs(base) + rep.loss_jobs(base))

@@ -8,12 +8,15 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from doubles import Offline, episode_end, episode_start, received
-from tltrack import keys
-from tltrack.messages import EstimateMsg, Truth, encode
 from tltrack.services.scorer import scorer as scorer_svc
 from tltrack.services.scorer.store import Store
 from tltrack.services.scorer.summary import Summarizer
+from tltrack.wire import keys
+from tltrack.wire.messages import EstimateMsg, Truth, encode
+
+pytestmark = pytest.mark.unit
 
 E = "ep-r0"
 

@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 from doubles import Offline, episode_end, episode_start, received
 from livestack import SIM_DEFAULTS
-from tltrack import keys
 from tltrack.config import make_config
 from tltrack.engine.scenario import measurements, truth
 from tltrack.engine.setup import Setup
-from tltrack.messages import Measurement, Tick, encode
 from tltrack.services.sensor import sensor as sensor_svc
+from tltrack.wire import keys
+from tltrack.wire.messages import Measurement, Tick, encode
+
+pytestmark = pytest.mark.unit
 
 E, K = "ep-r0", 6
 

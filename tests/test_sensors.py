@@ -29,6 +29,8 @@ from tltrack.models.constant_acceleration import ConstantAcceleration
 from tltrack.models.position import Position
 from tltrack.models.range_bearing_doppler import RangeBearingDoppler
 
+pytestmark = pytest.mark.unit
+
 SENSOR_AT = (50.0, -20.0)
 Sensor = Bearing | Position | RangeBearingDoppler
 SENSORS: dict[str, Callable[[Layout], Sensor]] = {

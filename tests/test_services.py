@@ -9,10 +9,11 @@ import msgpack
 import numpy as np
 import pytest
 from livestack import estimates, logs, sim_flags, stack, start_all, wait_until
-from tltrack import demo, keys, latency
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
-from tltrack.messages import SCHEMA_VERSION
+from tltrack.live import latency, supervisor
+from tltrack.wire import keys
+from tltrack.wire.messages import SCHEMA_VERSION
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
@@ -26,7 +27,7 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
     with stack(tmp_path) as s:
         start_all(s, db, primary_env=primary_env, sim=sim_flags(K, N, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     cfg = make_config(
         preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True
@@ -68,7 +69,7 @@ def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
         s.kill("source_tracker")
         killed_at = max(estimates(db)["tl-rpf"])
         assert s.wait("sensor_sim", 60) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     tl = estimates(db)["tl-rpf"]
     assert sorted(tl) == list(range(1, K + 1)), "the primary missed steps"
@@ -87,7 +88,7 @@ def test_services_start_in_any_order_router_last(tmp_path):
         time.sleep(2.0)
         s.start_router()
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     for name in ("tl-rpf", "rpf", "source-rpf"):
         assert summary["filters"][name]["steps"] == 20
@@ -142,8 +143,8 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
             keys.primary_estimate("tl", "ep-r0"),
             keys.source_estimate("s1", "ep-r0"),
         ]
-        with demo.client(s.endpoint) as session:
-            from tltrack.transport import LivelinessWatcher
+        with supervisor.client(s.endpoint) as session:
+            from tltrack.wire.transport import LivelinessWatcher
 
             with LivelinessWatcher(session, keys.ALIVE) as w:
                 for svc in (
@@ -160,12 +161,14 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert wait_until(
             lambda: (
-                (demo.fetch_summary(s.endpoint) or {}).get("messages", {}).get("rejected_total", 0)
+                (supervisor.fetch_summary(s.endpoint) or {})
+                .get("messages", {})
+                .get("rejected_total", 0)
                 >= 3 * len(GARBAGE)
             ),
             30,
         )
-        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None
         for svc in ("primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"):
             assert sum(summary["messages"]["rejected"][svc].values()) >= len(GARBAGE), svc
@@ -201,6 +204,6 @@ def test_services_run_against_a_stock_zenohd(tmp_path):
             s.start_service(name, env=env)
         s.start_service("sensor_sim", *sim_flags(20, 300, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = demo.wait_for_scored(s.endpoint, 1, 120)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     assert summary["filters"]["tl-rpf"]["steps_with_transfer"] == 19

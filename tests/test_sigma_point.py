@@ -11,6 +11,8 @@ from tltrack.filters.sigma_point import SigmaPointFilter, SigmaRule, cubature3, 
 from tltrack.models import ConstantVelocity, CoordinatedTurn, RangeBearing, wrap_angle
 from tltrack.models.observation import Observation
 
+pytestmark = pytest.mark.unit
+
 RULES = {
     "ukf": lambda n: unscented(n, 2.0),
     "ckf3": cubature3,

@@ -1,4 +1,4 @@
-"""tltrack.topology: who dials whom, and each router's rules and dictionary (no process)."""
+"""tltrack.live.topology: who dials whom, and each router's rules and dictionary (no process)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,10 @@ import json
 
 import pytest
 import zenoh
-from tltrack import topology
-from tltrack.topology import access_env, federated, identity_operator, passwords, router_argv
+from tltrack.live import topology
+from tltrack.live.topology import access_env, federated, identity_operator, passwords, router_argv
+
+pytestmark = pytest.mark.unit
 
 
 def test_each_source_dials_the_primary_and_every_router_the_referee() -> None:

@@ -1,6 +1,6 @@
 """Key layout, Zenoh settings, and real sessions over loopback through a router subprocess.
 
-The router runs :func:`tltrack.transport.run_router` in its own process on a free port; clients
+The router runs :func:`tltrack.wire.transport.run_router` in its own process on a free port; clients
 are real sessions (in this process or in child processes). Every session is closed with ``with``.
 """
 
@@ -24,9 +24,9 @@ import pytest
 import zenoh
 from doubles import RADAR
 from security_helpers import make_certs
-from tltrack import keys
-from tltrack.messages import Measurement, RejectCounter, Transfer, decode, encode
-from tltrack.transport import (
+from tltrack.wire import keys
+from tltrack.wire.messages import Measurement, RejectCounter, Transfer, decode, encode
+from tltrack.wire.transport import (
     LivelinessWatcher,
     Publisher,
     Queryable,
@@ -47,6 +47,7 @@ T0 = 1_700_000_000.0
 # ---- keys -------------------------------------------------------------------------------------
 
 
+@pytest.mark.unit
 def test_key_builders() -> None:
     assert keys.truth("e1") == "tltrack/truth/e1"
     assert keys.episode("e1") == "tltrack/episode/e1"
@@ -64,6 +65,7 @@ def test_key_builders() -> None:
     assert keys.SCORER_SUMMARY == "tltrack/scorer/summary"
 
 
+@pytest.mark.unit
 def test_key_patterns() -> None:
     assert keys.PRIMARY_MEAS == "tltrack/primary/meas/*"
     assert keys.TRANSFERS == "tltrack/source/*/transfer/*"
@@ -89,6 +91,7 @@ def test_key_patterns() -> None:
 
 
 @pytest.mark.parametrize("bad", ["", "a/b", "**", "$*", "a b", "é", "x" * 65, "e*"])
+@pytest.mark.unit
 def test_key_builders_refuse_bad_ids(bad: str) -> None:
     with pytest.raises(ValueError):
         keys.truth(bad)
@@ -100,6 +103,7 @@ def test_key_builders_refuse_bad_ids(bad: str) -> None:
         keys.stats("primary", bad)
 
 
+@pytest.mark.unit
 def test_key_builders_refuse_bad_operator_and_role() -> None:
     for op in ("source", "source/a/b", "primaryx", "tltrack"):
         with pytest.raises(ValueError):
@@ -108,6 +112,7 @@ def test_key_builders_refuse_bad_operator_and_role() -> None:
         keys.primary_estimate("fused", "e1")
 
 
+@pytest.mark.unit
 def test_parse_round_trips() -> None:
     cases = {
         keys.truth("e1"): ("truth", "e1", None),
@@ -151,6 +156,7 @@ def test_parse_round_trips() -> None:
         "tltrack//truth",
     ],
 )
+@pytest.mark.unit
 def test_parse_refuses_foreign_keys(bad: str) -> None:
     with pytest.raises(ValueError):
         keys.parse(bad)
@@ -159,6 +165,7 @@ def test_parse_refuses_foreign_keys(bad: str) -> None:
 # ---- settings ---------------------------------------------------------------------------------
 
 
+@pytest.mark.unit
 def test_settings_defaults_map_to_zenoh_config() -> None:
     cfg = ZenohSettings().to_config()
 
@@ -173,6 +180,7 @@ def test_settings_defaults_map_to_zenoh_config() -> None:
     assert get("transport/link/tx/lease") == 2000
 
 
+@pytest.mark.unit
 def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("TLTRACK_ZENOH_MODE", "peer")
     monkeypatch.setenv("TLTRACK_ZENOH_ENDPOINTS", "tcp/10.0.0.1:7447, tcp/10.0.0.2:7447")
@@ -203,6 +211,7 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
         {"unknown_field": 1},
     ],
 )
+@pytest.mark.unit
 def test_settings_refuse_inconsistent_values(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ZenohSettings(**kwargs)  # type: ignore[arg-type]
@@ -272,7 +281,7 @@ class Child:
 
 ROUTER_CODE = """
     import json, sys
-    from tltrack.transport import ZenohSettings, run_router
+    from tltrack.wire.transport import ZenohSettings, run_router
     settings = ZenohSettings(**json.loads(sys.argv[2]))
     run_router([sys.argv[1]], settings)
     print("router exited cleanly", flush=True)
@@ -457,7 +466,7 @@ def test_queryable_failure_becomes_an_error_reply(router: str) -> None:
 
 HOLDER_CODE = """
     import sys, time
-    from tltrack.transport import ZenohSettings, declare_token, open_session
+    from tltrack.wire.transport import ZenohSettings, declare_token, open_session
     with open_session(ZenohSettings(endpoints=[sys.argv[1]])) as session:
         token = declare_token(session, sys.argv[2])
         print("holding", flush=True)
@@ -583,8 +592,8 @@ def test_acl_by_operator_prefix(tmp_path: Path) -> None:
         assert router_proc.stop() == 0
 
 
-@pytest.mark.integration
 @pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl CLI")
+@pytest.mark.integration
 def test_mutual_tls(tmp_path: Path) -> None:
     make_certs(tmp_path, names="primary")  # scripts/make_certs.sh
     port = free_port()

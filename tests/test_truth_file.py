@@ -1,4 +1,4 @@
-"""Recorded tracks as truth (tltrack.engine.truth_file): refusals, resampling, the frame, states."""
+"""Recorded tracks as truth (tltrack.config.truth_file): refusals, resampling, the frame, states."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tltrack.engine.truth_file import (
-    STATE_LAYOUTS,
+from tltrack.config.truth_file import (
     StateLayout,
     TruthFileError,
     check_clearance,
@@ -21,6 +20,9 @@ from tltrack.engine.truth_file import (
     resample,
     to_local,
 )
+from tltrack.models.kinds import MOTIONS
+
+pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = ROOT / "examples" / "tracks" / "ais-nyharbor-2020-06-30-mmsi-367370920.csv"
@@ -198,7 +200,7 @@ def test_state_layouts_place_every_component():
     np.testing.assert_allclose(full_state(p, 1.0, custom)[:, [2, 3, 0, 1]], cv)
     with pytest.raises(ValueError, match="exactly once"):
         StateLayout(n=5, pos=(0, 2), vel=(1, 3))
-    assert STATE_LAYOUTS["ca"].acc == (2, 5)
+    assert StateLayout.of(MOTIONS.get("ca").components).acc == (2, 5)
 
 
 # -------------------------------------------------------------------------------------- the frame
@@ -305,7 +307,7 @@ def test_the_shipped_track_loads_clear_of_the_default_sensors():
     assert np.hypot(*truth.positions.T).min() > 1900.0
     for kind in ("cv", "ct", "ca"):
         x = full_state(truth.positions, truth.Ts, kind)
-        assert x.shape == (2851, STATE_LAYOUTS[kind].n) and np.all(np.isfinite(x))
+        assert x.shape == (2851, len(MOTIONS.get(kind).components)) and np.all(np.isfinite(x))
     ct = full_state(truth.positions, truth.Ts, "ct")
     speed = np.hypot(ct[:, 1], ct[:, 3])
     assert speed.min() > 1.0 and speed.max() < 6.0  # 3.2-10.4 kn reported

@@ -8,8 +8,10 @@ from __future__ import annotations
 import json
 import logging
 
-from tltrack import keys
-from tltrack.messages import (
+from tltrack.services.dashboard.metrics import Metrics
+from tltrack.services.dashboard.state import Role, State
+from tltrack.wire import keys
+from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
     EpisodeEnd,
     EpisodeStart,
@@ -17,9 +19,7 @@ from tltrack.messages import (
     RejectCounter,
     Truth,
 )
-from tltrack.services.dashboard.metrics import Metrics
-from tltrack.services.dashboard.state import Role, State
-from tltrack.transport import Received, decode_received
+from tltrack.wire.transport import Received, decode_received
 
 log = logging.getLogger("dashboard")
 

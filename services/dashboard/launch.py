@@ -1,5 +1,5 @@
-"""Starting the dashboard as one more service of a :class:`tltrack.demo.Stack` (``tltrack demo
---serve``, tests), and making sensor_sim wait for it so the page sees every step.
+"""Starting the dashboard as one more service of a :class:`tltrack.live.supervisor.Stack`
+(``tltrack demo --serve``, tests), and making sensor_sim wait for it so the page sees every step.
 
 Light on purpose: no web framework is imported until the dashboard process itself runs.
 """

@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import logging
 
-from tltrack import keys
-from tltrack.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.services.dashboard.ingest import SUBSCRIPTIONS, Ingest
 from tltrack.services.dashboard.metrics import Metrics
 from tltrack.services.dashboard.settings import NAME, Settings
 from tltrack.services.dashboard.state import State
 from tltrack.services.dashboard.web import WebServer, create_app
+from tltrack.wire import keys
 
 log = logging.getLogger("dashboard")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack.transport import ZenohSettings
+from tltrack.wire.transport import ZenohSettings
 
 NAME = "dashboard"
 DEFAULT_HOST = "127.0.0.1"

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-from tltrack import latency
 from tltrack.engine.setup import PRIMARY, sensor_spec
-from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.live import latency
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 
 Role = Literal["source", "tl", "isolated"]
 Verdict = Literal["new", "duplicate", "capacity"]
@@ -62,7 +62,7 @@ class Track:
     used: dict[int, bool] = field(default_factory=dict)
     latency_ms: dict[int, float] = field(default_factory=dict)
     step_ms: dict[int, float] = field(default_factory=dict)
-    stages: dict[int, tuple[float, ...]] = field(default_factory=dict)  #: tltrack.latency's
+    stages: dict[int, tuple[float, ...]] = field(default_factory=dict)  #: tltrack.live.latency's
     err: dict[int, float] = field(default_factory=dict)  #: position error where truth is known
     err_sum: float = 0.0
 

@@ -8,7 +8,7 @@ about a second. A fresh one reads only the episodes not yet scored (a scored epi
 kept, :class:`~tltrack.services.scorer.summary.Summarizer`), and a scorer nobody asks computes
 none while an episode runs. A truth or an estimate
 that overtakes its episode's start (another key, maybe another route) is held until the start
-arrives (:mod:`tltrack.held`).
+arrives (:mod:`tltrack.live.held`).
 """
 
 from __future__ import annotations
@@ -23,14 +23,14 @@ from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys
-from tltrack.held import Held
-from tltrack.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
-from tltrack.service import Service, load_settings, setup_logging
+from tltrack.live.held import Held
+from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.summary import print_summary
 from tltrack.services.scorer.store import Store
 from tltrack.services.scorer.summary import Summarizer
-from tltrack.summary import print_summary
-from tltrack.transport import Queryable, Received, ZenohSettings, decode_received
+from tltrack.wire import keys
+from tltrack.wire.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.wire.transport import Queryable, Received, ZenohSettings, decode_received
 
 log = logging.getLogger("scorer")
 NAME = "scorer"

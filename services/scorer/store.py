@@ -12,7 +12,7 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
-from tltrack.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS episodes (

@@ -3,7 +3,7 @@
 RMSE follows the paper: RMSE(k) = sqrt(mean over episodes of the squared position error at k),
 overall = mean over k. Latency is end to end: sensor timestamp to the estimate's arrival here
 (meaningful on one host; across hosts it needs synchronised clocks). ``stages_ms`` splits it into
-the p50 of each stage of :mod:`tltrack.latency`.
+the p50 of each stage of :mod:`tltrack.live.latency`.
 
 Each episode is scored on its own, from its rows alone (read through the tables' primary keys), and
 a :class:`Summarizer` keeps the scores of the episodes the scorer has finished with: a summary then
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from tltrack import latency
+from tltrack.live import latency
 from tltrack.services.scorer.store import Store
 
 
@@ -52,7 +52,7 @@ class _Scores:
     used: int
     recoveries: int
     end_to_end: NDArray[np.float64]  #: ms, one per step
-    split: NDArray[np.float64]  #: (n, 5) :func:`tltrack.latency.stages`, ms
+    split: NDArray[np.float64]  #: (n, 5) :func:`tltrack.live.latency.stages`, ms
 
 
 def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:

@@ -4,7 +4,7 @@ publishes its measurement of that step on its owner's key, through its owner's r
 The measurements of an episode of run r come from the same per-run stream as ``tltrack
 experiment``'s (the truth regenerated from the seeds, then this sensor's noise), so the live
 episode still equals the engine's; no Truth message is needed, and none is read. With
-``replay_csv`` it replays this sensor's recorded rows instead (:mod:`tltrack.replay`'s schema;
+``replay_csv`` it replays this sensor's recorded rows instead (:mod:`tltrack.live.replay`'s schema;
 the file holds this sensor's rows only, as an operator has no other).
 """
 
@@ -18,14 +18,15 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys, replay
 from tltrack.config import Config
 from tltrack.engine.scenario import measurements, truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.messages import EpisodeStart, Measurement, Tick
-from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import Episodes
-from tltrack.transport import Received, ZenohSettings, decode_received
+from tltrack.live import replay
+from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.tracking import Episodes
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, Measurement, Tick
+from tltrack.wire.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("sensor")
 NAME = "sensor"

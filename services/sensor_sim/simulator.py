@@ -20,14 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys, replay
-from tltrack.config import Config
+from tltrack.config import Config, load_config
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.engine.truth_file import experiment_config
-from tltrack.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
-from tltrack.service import Service, load_settings, setup_logging
-from tltrack.transport import LivelinessWatcher, Queryable, ZenohSettings
+from tltrack.live import replay
+from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
+from tltrack.wire.transport import LivelinessWatcher, Queryable, ZenohSettings
 
 log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"
@@ -75,7 +75,7 @@ class Settings(BaseSettings):
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
-    def experiment_config(self) -> Config:
+    def load_config(self) -> Config:
         over: dict[str, Any] = {
             "scenario": self.scenario,
             "preset": self.preset,
@@ -86,7 +86,7 @@ class Settings(BaseSettings):
             "primary_intensity": self.primary_intensity,
             "truth_file": self.truth_file,
         }
-        return experiment_config(self.config, **over)
+        return load_config(self.config, **over)
 
 
 class Simulator:
@@ -203,7 +203,7 @@ def main(argv: list[str] | None = None) -> None:
     settings = load_settings(Settings, argv)
     setup_logging(settings.log_level)
     try:
-        cfg = settings.experiment_config()
+        cfg = settings.load_config()
     except ValueError as err:  # a ConfigError, or a truth file refused
         log.error("invalid configuration: %s", err)
         raise SystemExit(2) from None

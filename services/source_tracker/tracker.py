@@ -8,19 +8,19 @@ from dataclasses import dataclass, field
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack import keys
 from tltrack.config import Config, FilterKindName
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
-from tltrack.messages import EpisodeStart, Measurement
-from tltrack.service import Service, load_settings, setup_logging
-from tltrack.tracking import (
+from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.tracking import (
     SourceEpisode,
     StepQueue,
     StepReport,
     TrackedEpisodes,
 )
-from tltrack.transport import Received, ZenohSettings, decode_received
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, Measurement
+from tltrack.wire.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("source_tracker")
 NAME = "source_tracker"

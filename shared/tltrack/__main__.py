@@ -1,3 +1,3 @@
-from tltrack.cli import app
+from tltrack.app.cli import app
 
 app()

@@ -13,10 +13,10 @@ import numpy as np
 
 import tltrack
 from tltrack.config import Config
+from tltrack.config.truth_file import recorded_track
 from tltrack.engine.montecarlo import FilterResult
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.engine.truth_file import recorded_track
 
 SCHEMA_VERSION = 1
 

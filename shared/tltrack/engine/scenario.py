@@ -7,7 +7,7 @@ three readings exist:
 - ``fixed``: one realization from ``truth_seed``, shared by every run (the default);
 - ``random``: a fresh realization per run;
 - ``noise-free``: f applied with no process noise;
-- ``file``: a recorded track (:mod:`tltrack.engine.truth_file`), the same for every run.
+- ``file``: a recorded track (:mod:`tltrack.config.truth_file`), the same for every run.
 
 Measurements and the filters' initial estimate x0_hat ~ N(x0, P0) are fresh per run (the
 cubature-KF benchmark's convention), each from its own stream.
@@ -21,10 +21,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.config.truth_file import file_truth
 from tltrack.engine.faults import miscalibration, observed_truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
-from tltrack.engine.truth_file import file_truth
 
 Array = NDArray[np.float64]
 

@@ -17,7 +17,7 @@ from functools import cached_property, lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import Config, SensorSpec
+from tltrack.config import PRIMARY, Config, SensorSpec, position_of
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.kinds import MOTIONS, SENSORS
@@ -25,8 +25,7 @@ from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
 
-#: the primary operator's sensor id; a source's is its own id
-PRIMARY = "primary"
+__all__ = ["PRIMARY", "OwnSensor", "Setup", "from_spec", "intensity", "motion_model", "sensor_spec"]
 
 
 def motion_model(cfg: Config) -> MotionModel:
@@ -40,10 +39,9 @@ def sensor_spec(cfg: Config, sensor_id: str = PRIMARY) -> SensorSpec:
     (a parameter left out takes its default: an inherited one, the config's top-level field of
     its name, as the flat ``sigma_r`` and ``sigma_bearing``)."""
     if sensor_id == PRIMARY:
-        spec, position = cfg.primary_sensor, cfg.primary_position
+        spec = cfg.primary_sensor
     else:
-        src = next(s for s in cfg.sources if s.id == sensor_id)
-        spec, position = src.sensor, src.position
+        spec = next(s for s in cfg.sources if s.id == sensor_id).sensor
     spec = spec or SensorSpec.model_validate({})
     given = spec.params
     params = {}
@@ -52,8 +50,7 @@ def sensor_spec(cfg: Config, sensor_id: str = PRIMARY) -> SensorSpec:
         if value is None:
             raise ValueError(f"{sensor_id}: a {spec.kind} sensor needs {p.name} [{p.unit}]")
         params[p.name] = float(value)
-    at = spec.position or position or (0.0, 0.0)
-    return SensorSpec(kind=spec.kind, position=at, **params)
+    return SensorSpec(kind=spec.kind, position=position_of(cfg, sensor_id), **params)
 
 
 @lru_cache(maxsize=64)

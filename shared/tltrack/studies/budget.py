@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tltrack import plots
+from tltrack.engine import plots
 from tltrack.studies.common import Runner, Setting, plain, row, write
 
 BUDGETS = [0.05, 0.1, 0.25, 0.5, 0.75, 1.0]

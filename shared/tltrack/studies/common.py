@@ -19,11 +19,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import Config
+from tltrack.config import Config, load_config
 from tltrack.engine.montecarlo import FilterResult, run_sweep
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.engine.truth_file import experiment_config
 
 Results = dict[str, FilterResult]
 
@@ -135,7 +134,7 @@ class Setting:
         if self.source_filter is not None:
             srcs = data.get("sources", [{"id": "s1"}])
             data["sources"] = [{**s, "filter": self.source_filter} for s in srcs]
-        return experiment_config(None, **data)
+        return load_config(None, **data)
 
     def name(self, role: str = "") -> str:
         """The filter of this study's kind in ``role`` (``""``, ``tl-``, ``robust-tl-`` ...)."""

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from tltrack import plots
+from tltrack.engine import plots
 from tltrack.studies.common import Runner, Setting, bound, paired, plain, row, write
 
 #: label -> (the primary's sensor, the source's sensor)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from tltrack import plots
+from tltrack.engine import plots
 from tltrack.studies.common import Runner, Setting, mc_error, plain, row, run_difference, write
 
 INTENSITIES = (2, 3, 4, 5, 6, 7, 8)

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from tltrack import plots
-from tltrack.reproduce import RMSE_AT_IP, TABLE2
+from tltrack.engine import plots
 from tltrack.studies.common import Runner, Setting, row, write
+from tltrack.studies.reproduce import RMSE_AT_IP, TABLE2
 
 INTENSITIES = (4, 8)
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from tltrack import plots
+from tltrack.engine import plots
 from tltrack.filters.kinds import FILTERS
 from tltrack.studies.common import Runner, Setting, bound, paired, plain, row, write
 

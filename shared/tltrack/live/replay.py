@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-
 from tltrack.models.base import MeasurementModel
 
 REQUIRED = ("k", "sensor")

@@ -24,8 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
-
-from tltrack.messages import EstimateMsg
+from tltrack.wire.messages import EstimateMsg
 
 STAGES = ("to_tracker", "wait", "step", "publish", "to_receiver")
 

@@ -7,9 +7,8 @@ from concurrent.futures import Executor
 from pathlib import Path
 from typing import Any
 
-from tltrack import plots
 from tltrack.config import Config
-from tltrack.engine import results
+from tltrack.engine import plots, results
 from tltrack.engine.montecarlo import run_experiment, trace_run
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import Setup

@@ -32,7 +32,6 @@ from pydantic import (
     model_validator,
 )
 from pydantic_core import PydanticCustomError
-
 from tltrack.config import SensorSpec
 from tltrack.models.kinds import MOTIONS, SENSORS
 

@@ -33,8 +33,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import zenoh
 from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
-
-from tltrack.messages import (
+from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
     Message,
     MessageRejected,
@@ -128,7 +127,7 @@ class ZenohSettings(BaseSettings):
 
         put("mode", self.mode)
         put("scouting/multicast/enabled", False)
-        # routers link only where configured (tltrack.topology): no router learns of another
+        # routers link only where configured (tltrack.live.topology): no router learns of another
         # through a third, so none can route one operator's traffic through a neighbour's host
         put("scouting/gossip/enabled", False)
         put("connect/endpoints", list(self.endpoints))

@@ -15,9 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tltrack import plots
 from tltrack.config import Config, make_config
-from tltrack.engine import results
+from tltrack.engine import plots, results
 from tltrack.engine.montecarlo import expand, run_sweep
 
 KF_FILTERS = ["ukf", "tl-ukf", "ckf3", "tl-ckf3", "ckf5", "tl-ckf5"]

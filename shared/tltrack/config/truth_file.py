@@ -104,15 +104,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 
-from tltrack.config import Config, ConfigError, make_config, read_mapping
-from tltrack.engine.setup import Setup
+from tltrack.config.schema import Config
 from tltrack.models.angles import wrap_angle
+from tltrack.models.kinds import MOTIONS
 
 Array = NDArray[np.float64]
 
@@ -190,13 +190,19 @@ class StateLayout:
         if sorted(used) != list(range(self.n)):
             raise ValueError(f"state layout {self} must fill indices 0..{self.n - 1} exactly once")
 
+    @classmethod
+    def of(cls, components: tuple[str, ...]) -> StateLayout:
+        """The layout a motion model declares by its components' names (``x_m``, ``vx_mps``,
+        ``ax_mps2``, ``omega_radps``...); a ValueError names what a truth file cannot fill."""
+        at = {c: i for i, c in enumerate(components)}
 
-#: the layouts of the scenarios' motion models (tltrack.models): CV, CT and CA
-STATE_LAYOUTS: dict[str, StateLayout] = {
-    "cv": StateLayout(n=4, pos=(0, 2), vel=(1, 3)),
-    "ct": StateLayout(n=5, pos=(0, 2), vel=(1, 3), turn_rate=4),
-    "ca": StateLayout(n=6, pos=(0, 3), vel=(1, 4), acc=(2, 5)),
-}
+        def pair(a: str, b: str) -> tuple[int, int] | None:
+            return (at[a], at[b]) if a in at and b in at else None
+
+        pos, vel = pair("x_m", "y_m"), pair("vx_mps", "vy_mps")
+        if pos is None or vel is None:
+            raise ValueError(f"a truth file fills x, y, vx, vy: the state {components} lacks some")
+        return cls(len(components), pos, vel, pair("ax_mps2", "ay_mps2"), at.get("omega_radps"))
 
 
 # ---------------------------------------------------------------------------------------- reading
@@ -462,9 +468,9 @@ def full_state(
 ) -> Array:
     """The true states (K + 1, n) along resampled positions (K + 1, 2); formulas in the docstring.
 
-    ``layout`` is a :class:`StateLayout` or a key of :data:`STATE_LAYOUTS` ("cv", "ct", "ca").
+    ``layout`` is a :class:`StateLayout` or a registered motion model's kind ("cv", "ct", "ca").
     """
-    lay = STATE_LAYOUTS[layout] if isinstance(layout, str) else layout
+    lay = StateLayout.of(MOTIONS.get(layout).components) if isinstance(layout, str) else layout
     p = np.asarray(positions, dtype=float)
     if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3:
         raise ValueError(f"positions must be (K + 1, 2) with K >= 2, not {p.shape}")
@@ -532,63 +538,19 @@ def load_truth(
 # ---------------------------------------------------------------------------------- configuring
 
 
-def configure(data: Mapping[str, Any], *, trusted: bool = False) -> dict[str, Any]:
-    """A config mapping with a ``truth_file``, completed from the file: ``truth = "file"``, K the
-    file's length unless the mapping sets a shorter one, and x0 the track's first state unless
-    the mapping sets one. Every sensor is then checked for clearance from the track.
-
-    Entry points (``tltrack experiment``, ``study``, sensor_sim) run it on the mapping they build
-    before making the :class:`~tltrack.config.Config`, so the config they share carries K and x0
-    explicitly: a tracker elsewhere never needs the file. ``trusted``: the mapping is the user's
-    own (:func:`~tltrack.config.make_config`). Raises :class:`TruthFileError` or
-    :class:`~tltrack.config.ConfigError`.
-    """
-    if data.get("truth_file") is None:
-        return dict(data)
-    out = {**data}
-    if out.get("truth") not in (None, "file"):
-        raise ConfigError(
-            f"truth: give either truth_file or truth (the mode {out['truth']!r}), not both"
-        )
-    out["truth"] = "file"
-    draft = make_config(out, trusted=trusted)  # the scenario, Ts and the sensors, validated
-    track = recorded_track(draft)
-    if "K" not in out:
-        out["K"] = track.K
-    elif int(out["K"]) > track.K:
-        raise TruthFileError(
-            f"{track.name}: K = {out['K']} steps is longer than the track ({track.K} steps of "
-            f"{draft.Ts:g} s); a truth file's K may only shorten it"
-        )
-    if "x0" not in out:
-        out["x0"] = _states(draft, track)[0].tolist()
-    setup = Setup(make_config(out, trusted=trusted))
-    where = {sid: s.spec.position or (0.0, 0.0) for sid, s in setup.sensors.items()}
-    check_clearance(track.positions[: setup.cfg.K + 1], where, name=track.name)
-    return out
-
-
-def experiment_config(path: str | Path | None, **overrides: Any) -> Config:
-    """The config of a TOML/JSON file (if any) with the ``overrides`` that are not None on top,
-    completed from its truth file (:func:`configure`) if it has one; raises ``ValueError``."""
-    data = read_mapping(path) if path is not None else {}
-    data |= {k: v for k, v in overrides.items() if v is not None}
-    return make_config(configure(data, trusted=True), trusted=True)
-
-
 def file_truth(cfg: Config) -> Array:
     """The truth x_0..x_K (K + 1, n_x) of a config whose truth is a file (see :func:`configure`).
 
     Refuses a config whose x0 is not the track's first state: it was not built by
     :func:`configure`, and its filters would start somewhere else.
     """
-    x = _states(cfg, recorded_track(cfg))
+    x = track_states(cfg, recorded_track(cfg))
     if len(x) < cfg.K + 1:
         raise TruthFileError(f"{cfg.truth_file}: K = {cfg.K} is longer than the track")
     if not np.allclose(x[0], cfg.x0, rtol=1e-9, atol=1e-9):
         raise TruthFileError(
             f"{cfg.truth_file}: the config's x0 is not the track's first state; build the config "
-            "with tltrack.engine.truth_file.configure"
+            "with tltrack.config.truth_file.configure"
         )
     return x[: cfg.K + 1]
 
@@ -605,5 +567,5 @@ def _load(path: str, Ts: float, origin: tuple[float, float] | None, max_gap_s: f
     return load_truth(path, Ts, origin=origin, max_gap_s=max_gap_s)
 
 
-def _states(cfg: Config, track: TruthTrack) -> Array:
+def track_states(cfg: Config, track: TruthTrack) -> Array:
     return full_state(track.positions, cfg.Ts, cfg.scenario)

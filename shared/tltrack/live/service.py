@@ -24,11 +24,10 @@ from typing import Any, TypeVar
 import zenoh
 from pydantic import ValidationError
 from pydantic_settings import BaseSettings
-
-from tltrack import keys, plugins
-from tltrack.config import describe_validation_error
-from tltrack.messages import Message, RejectCounter
-from tltrack.transport import (
+from tltrack.config import describe_validation_error, plugins
+from tltrack.wire import keys
+from tltrack.wire.messages import Message, RejectCounter
+from tltrack.wire.transport import (
     Publisher,
     Received,
     Subscriber,
@@ -46,7 +45,7 @@ S = TypeVar("S", bound=BaseSettings)
 
 def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
     """Settings from the environment and ``--flags``, once the plugin kinds this process is told
-    of are loaded (:mod:`tltrack.plugins`); exits with status 2 naming a bad field."""
+    of are loaded (:mod:`tltrack.config.plugins`); exits with status 2 naming a bad field."""
     try:
         plugins.load()
     except ValueError as err:

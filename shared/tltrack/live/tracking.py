@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
-
 from tltrack.config import Config
 from tltrack.engine.driver import Link, Primaries, Sources, StepRecord, reported_name
 from tltrack.engine.montecarlo import check_filters
@@ -25,8 +24,11 @@ from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import initial_estimate
 from tltrack.engine.setup import PRIMARY, Setup, from_spec
 from tltrack.filters.base import Array, Estimate
-from tltrack.held import Handling, Held
-from tltrack.messages import (
+from tltrack.live.held import Handling, Held
+from tltrack.live.service import Service
+from tltrack.models.base import Layout, PositionFix
+from tltrack.models.observation import Observation
+from tltrack.wire.messages import (
     EpisodeEnd,
     EpisodeStart,
     EstimateMsg,
@@ -35,10 +37,7 @@ from tltrack.messages import (
     RejectCounter,
     Transfer,
 )
-from tltrack.models.base import Layout, PositionFix
-from tltrack.models.observation import Observation
-from tltrack.service import Service
-from tltrack.transport import Received, decode_received
+from tltrack.wire.transport import Received, decode_received
 
 T = TypeVar("T")
 
@@ -404,7 +403,7 @@ class TrackedEpisodes(Episodes[E]):
         """Queue ``z`` in its episode's step order; held while the episode is not yet open.
 
         A measurement of the wrong size for the sensor, a duplicate, a stale step, one far
-        ahead, one of an episode closed here, or one the hold cannot keep (:mod:`tltrack.held`)
+        ahead, one of an episode closed here, or one the hold cannot keep (:mod:`tltrack.live.held`)
         is counted under its key.
         """
         ep = self.get(e)

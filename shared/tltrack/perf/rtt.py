@@ -20,10 +20,9 @@ from pathlib import Path
 
 import numpy as np
 import zenoh
-
-from tltrack import demo, topology
-from tltrack.topology import Kind
-from tltrack.transport import ZenohSettings, open_session
+from tltrack.live import supervisor, topology
+from tltrack.live.topology import Kind
+from tltrack.wire.transport import ZenohSettings, open_session
 
 PING, PONG, READY = "tltrack-bench/ping", "tltrack-bench/pong", "tltrack-bench/ready"
 
@@ -52,7 +51,7 @@ def _router_argv(listen: str, connect: str | None, zenohd: bool) -> list[str]:
     return ["-m", "tltrack", "router", "--listen", listen, *dial]
 
 
-def _wait_listening(stack: demo.Stack, name: str, endpoint: str, zenohd: bool) -> None:
+def _wait_listening(stack: supervisor.Stack, name: str, endpoint: str, zenohd: bool) -> None:
     """Our router says when it listens; a zenohd is asked by connecting to its port."""
     if not zenohd:
         stack.wait_listening(name)
@@ -78,7 +77,7 @@ def measure(
     first, last = (f"tcp/127.0.0.1:{p}" for p in ports)
     with (
         tempfile.TemporaryDirectory() as tmp,
-        demo.Stack(first, Path(tmp) / "logs") as stack,
+        supervisor.Stack(first, Path(tmp) / "logs") as stack,
     ):
         stack.start("router_a", _router_argv(first, None, zenohd))
         _wait_listening(stack, "router_a", first, zenohd)
@@ -86,7 +85,7 @@ def measure(
             stack.start("router_b", _router_argv(last, first, zenohd))
             _wait_listening(stack, "router_b", last, zenohd)
         there = last if kind == "federated" else first
-        code = "from tltrack.rtt import pong; pong()"
+        code = "from tltrack.perf.rtt import pong; pong()"
         stack.start("pong", ["-c", code], {"TLTRACK_ZENOH_ENDPOINTS": json.dumps([there])})
         return _ping(first, samples, warmup)
 

@@ -12,9 +12,8 @@ from typing import Annotated, Any, Literal, get_args
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
 from tltrack.config import Config, ConfigError
-from tltrack.topology import Kind as TopologyKind
+from tltrack.live.topology import Kind as TopologyKind
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -77,7 +76,7 @@ def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor
 
 def build_config(config: Path | None, **overrides: Any) -> Config:
     """Preset/file first, then any option given on the command line; exits with the field named."""
-    from tltrack.engine.truth_file import experiment_config
+    from tltrack.config import load_config
 
     source_intensity = overrides.pop("source_intensity", None)
     sources = overrides.pop("sources", None)
@@ -88,7 +87,7 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
             raise ConfigError("--sources: give either --sources or --source-intensity, not both")
         if sources is not None:
             overrides["sources"] = _parse_sources(sources)
-        cfg = experiment_config(config, **overrides)  # completed from a truth file, if any
+        cfg = load_config(config, **overrides)  # completed from a truth file, if any
         if source_intensity is not None:
             cfg = cfg.with_source_intensity(source_intensity)
         if fault is not None:
@@ -168,9 +167,9 @@ def experiment(
     scheduler: Scheduler = None,
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
+    from tltrack.engine.experiment import run_and_save
     from tltrack.engine.montecarlo import check_filters
     from tltrack.engine.registry import parse
-    from tltrack.experiment import run_and_save
 
     cfg = build_config(
         config,
@@ -244,8 +243,8 @@ def plot(
 
     Example: `tltrack plot out/experiment/results.json`
     """
+    from tltrack.engine.experiment import draw
     from tltrack.engine.results import read
-    from tltrack.experiment import draw
 
     try:
         doc = read(results_json)
@@ -277,7 +276,7 @@ def reproduce(
     scheduler: Scheduler = None,
 ) -> None:
     """Regenerate every figure and table of the paper's Simulation Results, with report.md."""
-    from tltrack import reproduce as rep
+    from tltrack.studies import reproduce as rep
 
     if table2_pf_only and losses_only:
         console.print("[red]error:[/red] --table2-pf-only and --losses-only: choose one")
@@ -330,8 +329,9 @@ def router(
     import os
     import tempfile
 
-    from tltrack import keys, topology
-    from tltrack.transport import ZenohSettings, run_router
+    from tltrack.live import topology
+    from tltrack.wire import keys
+    from tltrack.wire.transport import ZenohSettings, run_router
 
     if operator is not None and not (
         operator in (keys.REFEREE, keys.PRIMARY)
@@ -385,7 +385,7 @@ def demo(
     access control; every service runs as its operator. Any stop signal (or the death of this
     process) stops every process it started.
     """
-    from tltrack import demo as d
+    from tltrack.live import supervisor as d
 
     if config is None:
         preset, truth = preset or "arasaratnam-haykin", truth or "fixed"
@@ -423,9 +423,9 @@ def _run_demo(
 ) -> dict[str, Any]:
     """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
     ``topology`` set."""
-    from tltrack import topology
     from tltrack.filters.warm import warm_up
-    from tltrack.summary import print_summary
+    from tltrack.live import topology
+    from tltrack.live.summary import print_summary
 
     topo = topology.build(kind, [s.id for s in cfg.sources])
     endpoint = topo.referee.endpoint
@@ -587,8 +587,8 @@ def bench_live(
 
     Example: `tltrack bench-live --particles 6000 --pace 50 --json out/live.json`
     """
-    from tltrack import livebench
-    from tltrack.demo import Interrupted, stop_on_signals
+    from tltrack.live.supervisor import Interrupted, stop_on_signals
+    from tltrack.perf import livebench
 
     kinds = get_args(TopologyKind) if topology == "both" else (topology,)
     from tltrack.filters.kinds import FILTERS
@@ -627,7 +627,7 @@ def bench(
 
     Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `bench` extra)
     """
-    from tltrack.bench import format_table, run_bench
+    from tltrack.perf.bench import format_table, run_bench
 
     result = run_bench(particles=particles, repeats=repeats)
     console.print(format_table(result))

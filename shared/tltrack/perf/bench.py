@@ -38,7 +38,6 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
-
 from tltrack.config import Config, make_config
 from tltrack.engine.driver import Primaries, Sources
 from tltrack.engine.registry import parse
@@ -327,5 +326,5 @@ def format_table(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-if __name__ == "__main__":  # python -m tltrack.bench
+if __name__ == "__main__":  # python -m tltrack.perf.bench
     print(format_table(run_bench()))

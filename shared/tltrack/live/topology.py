@@ -22,12 +22,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from tltrack import keys
+from tltrack.wire import keys
 
 Kind = Literal["single", "federated"]
 TOPOLOGIES: tuple[Kind, ...] = ("federated", "single")
 
-ACCESS_DIR = Path(__file__).resolve().parent / "access"
+ACCESS_DIR = Path(__file__).resolve().parents[1] / "access"
 
 
 def free_port() -> int:

@@ -1,10 +1,11 @@
 """Messages that overtook the start of their episode.
 
 Zenoh keeps the order of the samples on one key, not across keys, so a measurement, a transfer, a
-truth or an estimate can arrive before the :class:`~tltrack.messages.EpisodeStart` it belongs to,
-above all when they travel different routes (per-operator routers). A service that refused them
-would lose the first steps of an episode for no fault of the sender. :class:`Held` keeps the
-handling of a few such (already validated) messages and hands them back once the episode opens.
+truth or an estimate can arrive before the :class:`~tltrack.wire.messages.EpisodeStart` it
+belongs to, above all when they travel different routes (per-operator routers). A service that
+refused them would lose the first steps of an episode for no fault of the sender. :class:`Held`
+keeps the handling of a few such (already validated) messages and hands them back once the
+episode opens.
 
 Everything comes off the network, so the hold is bounded: a few episodes (the oldest is dropped
 first), a few messages each, and a few seconds (:meth:`Held.expire`; a start is late by
@@ -17,7 +18,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from tltrack.messages import RejectCounter
+from tltrack.wire.messages import RejectCounter
 
 Handling = Callable[[], None]
 

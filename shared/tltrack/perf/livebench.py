@@ -4,9 +4,9 @@ for each topology (single router, a router per operator) and each particle filte
 A benchmark, not a test: it prints what it measured on this machine, now. The stack is the demo's
 (routers and services on loopback, under the shipped access control); latency is the scorer's,
 sensor timestamp to estimate arrival: the TL estimate's, every estimate's pooled, and the TL
-estimate's stages (:mod:`tltrack.latency`). Beside them, in the same run, the two terms of the
-physical limit: the routed Zenoh round trip (:mod:`tltrack.rtt`) and the TL step; and each
-filter's step live against the same step in-process (:func:`tltrack.bench.run_bench`).
+estimate's stages (:mod:`tltrack.live.latency`). Beside them, in the same run, the two terms of the
+physical limit: the routed Zenoh round trip (:mod:`tltrack.perf.rtt`) and the TL step; and each
+filter's step live against the same step in-process (:func:`tltrack.perf.bench.run_bench`).
 """
 
 from __future__ import annotations
@@ -17,10 +17,11 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from tltrack import demo, rtt, topology
-from tltrack.bench import run_bench
 from tltrack.config import make_config
-from tltrack.topology import Kind
+from tltrack.live import supervisor, topology
+from tltrack.live.topology import Kind
+from tltrack.perf import rtt
+from tltrack.perf.bench import run_bench
 
 #: the live episode: the demo's scenario, a fixed truth, run 0
 PRESET, TRUTH, SEED = "arasaratnam-haykin", "fixed", 0
@@ -37,16 +38,16 @@ def episode(
     db = tmp / f"scorer-{run}.sqlite"
     topo = topology.build(kind, ["s1"])
     env = {"TLTRACK_PRIMARY_FILTER": kind_filter, "TLTRACK_SOURCE_FILTER": kind_filter}
-    with demo.Stack(topo.referee.endpoint, tmp / f"logs-{run}", True, env, topo) as stack:
+    with supervisor.Stack(topo.referee.endpoint, tmp / f"logs-{run}", True, env, topo) as stack:
         stack.start_router()
         stack.start_service(
             "scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "2"}
         )
         wait = stack.start_trackers(make_config())
-        flags = demo.sim_flags(steps, particles, pace, False, PRESET, TRUTH, SEED)
+        flags = supervisor.sim_flags(steps, particles, pace, False, PRESET, TRUTH, SEED)
         stack.start_service("sensor_sim", *flags, env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait)})
         stack.wait("sensor_sim", steps / pace + 120)
-        summary = demo.wait_for_scored(stack.endpoint, 1, 60, "referee")
+        summary = supervisor.wait_for_scored(stack.endpoint, 1, 60, "referee")
     return summary or {}
 
 

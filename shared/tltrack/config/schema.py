@@ -12,9 +12,7 @@ passes silently.
 
 from __future__ import annotations
 
-import json
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -81,6 +79,9 @@ def _filter_kind(v: str) -> str:
 
 #: a filter kind in a service's own settings (trusted: a plugin may be named by import path)
 FilterKindName = Annotated[str, AfterValidator(_filter_kind)]
+
+#: the primary operator's sensor id; a source's is its own id
+PRIMARY = "primary"
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
@@ -383,6 +384,11 @@ class Config(BaseModel):
         return len(self.x0)
 
     @property
+    def sensor_ids(self) -> list[str]:
+        """The primary's sensor id, then every source's."""
+        return [PRIMARY, *(s.id for s in self.sources)]
+
+    @property
     def source(self) -> SourceSpec:
         """The first source: the paper's single source operator."""
         return self.sources[0]
@@ -436,24 +442,13 @@ def make_config(
         raise ConfigError(describe_validation_error(err)) from None
 
 
-def load_config(path: str | Path, **overrides: Any) -> Config:
-    """Load the user's TOML or JSON file (by extension); keyword overrides win over the file."""
-    return make_config(read_mapping(path), trusted=True, **overrides)
-
-
-def read_mapping(path: str | Path) -> dict[str, Any]:
-    """The top-level table of a TOML or JSON config file (by extension), not yet validated."""
-    p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as err:
-        raise ConfigError(f"cannot read config file {p}: {err.strerror}") from None
-    try:
-        data = tomllib.loads(text) if p.suffix.lower() == ".toml" else json.loads(text)
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
-        raise ConfigError(
-            f"{p}: not valid {p.suffix.lstrip('.').upper() or 'JSON'}: {err}"
-        ) from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{p}: the top level must be a table/object")
-    return data
+def position_of(cfg: Config, sensor_id: str = PRIMARY) -> tuple[float, float]:
+    """Where an operator's sensor sits: its sensor's position, else the operator's, else the
+    origin."""
+    if sensor_id == PRIMARY:
+        spec, position = cfg.primary_sensor, cfg.primary_position
+    else:
+        src = next(s for s in cfg.sources if s.id == sensor_id)
+        spec, position = src.sensor, src.position
+    at = (spec.position if spec is not None else None) or position or (0.0, 0.0)
+    return (float(at[0]), float(at[1]))

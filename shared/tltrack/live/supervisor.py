@@ -1,4 +1,4 @@
-"""``tltrack demo``: the routers (one per operator, or one for all: :mod:`tltrack.topology`)
+"""``tltrack demo``: the routers (one per operator, or one for all: :mod:`tltrack.live.topology`)
 and the services as separate processes on loopback, one episode, the scorer's summary, and a
 clean shutdown (no orphan, no hang).
 
@@ -29,12 +29,12 @@ from types import FrameType
 from typing import IO, Any
 
 import zenoh
-
-from tltrack import keys, plugins, topology
-from tltrack.config import Config
-from tltrack.topology import ACCESS_DIR, Topology
-from tltrack.topology import free_port as free_port
-from tltrack.transport import Publisher, ZenohSettings, open_session, query
+from tltrack.config import Config, plugins
+from tltrack.live import topology
+from tltrack.live.topology import ACCESS_DIR, Topology
+from tltrack.live.topology import free_port as free_port
+from tltrack.wire import keys
+from tltrack.wire.transport import Publisher, ZenohSettings, open_session, query
 
 #: the signals that stop a command and every process it started
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
