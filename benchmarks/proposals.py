@@ -39,7 +39,7 @@ import divergent_runs
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
-from tltrack.app.cli import app
+from tltrack.app import app
 from tltrack.filters.auxiliary import BETA, AuxiliaryParticleFilter, Draw, Proposal
 from tltrack.filters.kinds import FILTERS
 from tltrack.models.base import MotionModel

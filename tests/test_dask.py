@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 from livestack import wait_until
 from test_compose import ROOT, _clean_env, _remove_leftovers, _run, compose, image  # noqa: F401
-from tltrack.app.cli import app
+from tltrack.app import app
 from tltrack.config import Config, make_config
 from tltrack.engine import cluster
 from tltrack.engine.montecarlo import FilterResult, run_experiment

@@ -80,7 +80,7 @@ def test_every_filter_kind_runs_on_the_shipped_track(scenario: str) -> None:
 
 
 def test_the_cli_records_the_file_and_its_hash(tmp_path: Path) -> None:
-    from tltrack.app.cli import app
+    from tltrack.app import app
 
     out = tmp_path / "e"
     argv = ["experiment", "--truth-file", str(SHIP), "--filters", "ukf,tl-ukf", "--runs", "2"]

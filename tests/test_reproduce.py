@@ -1,5 +1,5 @@
 import pytest
-from tltrack.app.cli import app
+from tltrack.app import app
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit

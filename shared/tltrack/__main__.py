@@ -1,3 +1,3 @@
-from tltrack.app.cli import app
+from tltrack.app import app
 
 app()

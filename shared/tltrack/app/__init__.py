@@ -1,0 +1,9 @@
+"""The ``tltrack`` command: one module per command, each registering on the shared Typer app.
+
+Option names are a contract: other tools call them.
+"""
+
+from tltrack.app import bench, demo, experiment, reproduce, router, study
+from tltrack.app.common import app
+
+__all__ = ["app", "bench", "demo", "experiment", "reproduce", "router", "study"]

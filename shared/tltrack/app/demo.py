@@ -1,0 +1,155 @@
+"""``tltrack demo``: the live dual tracker on loopback, one episode, the scorer's summary."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from tltrack.app.common import (
+    app,
+    build_config,
+    console,
+    progress_bar,
+)
+from tltrack.config import Config
+from tltrack.live.topology import Kind as TopologyKind
+
+
+@app.command(
+    epilog="Examples:\n\n    tltrack demo\n\n    tltrack demo --steps 50 --particles 2000 "
+    "--json /tmp/d.json\n\n    tltrack demo --realtime\n\n    tltrack demo --serve   "
+    "# then open http://127.0.0.1:8050/ ; Ctrl-C stops everything"
+)
+def demo(
+    config: Annotated[
+        Path | None, typer.Option(help="TOML or JSON config: every source gets a tracker")
+    ] = None,
+    steps: Annotated[int | None, typer.Option(help="steps K of the episode [100]")] = None,
+    particles: Annotated[int | None, typer.Option(help="particles per PF [6000]")] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the summary here")] = None,
+    pace: Annotated[float, typer.Option(help="steps per second")] = 20.0,
+    realtime: Annotated[bool, typer.Option(help="pace at one step per Ts")] = False,
+    preset: Annotated[
+        str | None, typer.Option(help="paper or arasaratnam-haykin [arasaratnam-haykin]")
+    ] = None,
+    truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free [fixed]")] = None,
+    seed: Annotated[int | None, typer.Option(help="master seed [0]")] = None,
+    out: Annotated[Path, typer.Option(help="logs and the scorer's database")] = Path("out/demo"),
+    serve: Annotated[
+        bool, typer.Option(help="also run the live dashboard; keep everything up until Ctrl-C")
+    ] = False,
+    port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
+    host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
+    topology: Annotated[
+        TopologyKind, typer.Option(help="a router per operator (federated), or one for all")
+    ] = "federated",
+) -> None:
+    """Start the routers, the scorer, the trackers, the sensors and sensor_sim on loopback, run
+    one episode, print the summary.
+
+    Without --config the episode is the arasaratnam-haykin preset with a fixed truth, K = 100,
+    N = 6000 (the values in brackets); with it, the file's values, unless an option overrides
+    them. Federated: one router per operator (referee, primary, each source), each letting out
+    only what its owner shares; single: one router for all. The routers enforce the package's
+    access control; every service runs as its operator. Any stop signal (or the death of this
+    process) stops every process it started.
+    """
+    from tltrack.live import supervisor as d
+
+    if config is None:
+        preset, truth = preset or "arasaratnam-haykin", truth or "fixed"
+        steps, particles, seed = steps or 100, particles or 6000, seed or 0
+    cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
+    try:
+        d.check_access(cfg)
+    except d.AccessControlMissingError as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+    flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
+    try:
+        with d.stop_on_signals():
+            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host, topology)
+    except d.Interrupted as stop:
+        console.print(f"stopped by {stop}; the router and every service are stopped")
+        raise typer.Exit(128 + stop.signum) from None
+    if json_out:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1))
+        console.print(f"wrote {json_out}")
+
+
+def _run_demo(
+    d: Any,
+    cfg: Config,
+    sim_flags: list[str],
+    pace: float,
+    realtime: bool,
+    out: Path,
+    serve: bool,
+    port: int,
+    host: str,
+    kind: TopologyKind = "federated",
+) -> dict[str, Any]:
+    """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
+    ``topology`` set."""
+    from tltrack.filters.warm import warm_up
+    from tltrack.live import topology
+    from tltrack.live.summary import print_summary
+
+    topo = topology.build(kind, [s.id for s in cfg.sources])
+    endpoint = topo.referee.endpoint
+    db = out / "scorer.sqlite"
+    for suffix in ("", "-wal", "-shm"):
+        Path(f"{db}{suffix}").unlink(missing_ok=True)
+    console.print(
+        f"{kind} topology, routers: {topology.describe(topo)} (access control: "
+        f"{d.ACCESS_DIR}); logs in {out / 'logs'}"
+    )
+    warm_up()  # compile the kernels once here, not in several services at once
+    with d.Stack(endpoint, out / "logs", secure=True, topology=topo) as stack:
+        stack.start_router()
+        stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
+        wait_for = stack.start_trackers(cfg)
+        page = ""
+        if serve:
+            from tltrack.services.dashboard import launch
+
+            page = launch.start(stack, port, host)
+            if not launch.wait_ready(page, 30):
+                console.print(
+                    f"[red]error:[/red] the dashboard did not start (port {port} "
+                    f"taken?); see {out / 'logs' / 'dashboard.log'}"
+                )
+                raise typer.Exit(1)
+            wait_for.append(launch.TOKEN)  # sensor_sim also waits for the page: no step missed
+            console.print(f"dashboard: [bold]{page}[/bold]  (Prometheus metrics: {page}metrics)")
+        sim_env = {"TLTRACK_SIM_WAIT_FOR": json.dumps(wait_for)}
+        stack.start_service("sensor_sim", *sim_flags, env=sim_env)
+        K = cfg.K
+        budget = K * (cfg.Ts if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
+        with progress_bar(K, "episode") as bar:
+            task = bar.add_task("episode", total=None)
+            rc = stack.wait("sensor_sim", budget)
+            bar.update(task, completed=K, total=K)
+        if rc != 0:
+            console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
+            raise typer.Exit(1)
+        summary = d.wait_for_scored(endpoint, 1, 120, "referee")
+        if summary is None:
+            console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
+            raise typer.Exit(1)
+        summary["access_control"] = True  # the routers enforced the ACL; every service logged in
+        summary["topology"] = kind
+        print_summary(summary)
+        if serve:
+            console.print(f"dashboard: [bold]{page}[/bold] stays up; Ctrl-C stops everything")
+            d.serve_until_interrupted(stack, "dashboard")
+        else:
+            console.print(
+                "live page: tltrack demo --serve  ->  http://127.0.0.1:8050/ "
+                "(Prometheus metrics at /metrics)"
+            )
+    return summary

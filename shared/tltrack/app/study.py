@@ -1,0 +1,100 @@
+"""``tltrack study``: the studies beyond the paper."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from tltrack.app.common import (
+    BatchSize,
+    Scheduler,
+    Workers,
+    app,
+    console,
+    engine_pool,
+    progress_bar,
+)
+
+
+@app.command(
+    epilog="Examples:\n\n    tltrack study robust --runs 200\n\n"
+    "    tltrack study robust --kind rpf --source-filter pf --preset paper --truth fixed\n\n"
+    "    tltrack study heterogeneous --runs 200\n\n"
+    "    tltrack study realizations --realizations 100 --runs 50 --preset paper"
+)
+def study(
+    name: Annotated[
+        str,
+        typer.Argument(
+            help="robust, sources, budget, heterogeneous, presets, intensities or realizations"
+        ),
+    ],
+    runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
+    out: Annotated[Path, typer.Option(help="output directory")] = Path("out/studies"),
+    seed: Annotated[int, typer.Option(help="master seed (the robust design was tuned on 1)")] = 0,
+    kind: Annotated[str, typer.Option(help="the filter kind studied (pf, ukf, ...)")] = "pf",
+    source_filter: Annotated[
+        str | None, typer.Option(help="the sources' filter kind (default: --kind)")
+    ] = None,
+    preset: Annotated[str, typer.Option(help="paper or arasaratnam-haykin")] = "arasaratnam-haykin",
+    truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "noise-free",
+    truth_file: Annotated[
+        Path | None, typer.Option(help="a recorded track as the truth (not realizations)")
+    ] = None,
+    particles: Annotated[
+        int | None, typer.Option(help="particles per PF (default: the study's own)")
+    ] = None,
+    realizations: Annotated[int, typer.Option(help="realizations (study realizations)")] = 100,
+    filters: Annotated[
+        str, typer.Option(help="filters (study realizations)")
+    ] = "pf,tl-pf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5",
+    workers: Workers = None,
+    batch_size: BatchSize = None,
+    scheduler: Scheduler = None,
+) -> None:
+    """A study beyond the paper: a markdown report, its numbers (JSON) and a figure."""
+    from tltrack import studies
+    from tltrack.filters.kinds import FILTERS
+
+    def known_kind(k: str | None) -> bool:
+        try:
+            return k is None or FILTERS.get(k, trusted=True) is not None
+        except ValueError:
+            return False
+
+    by_name = {
+        "robust": studies.robust,
+        "sources": studies.sources,
+        "budget": studies.budget,
+        "heterogeneous": studies.heterogeneous,
+        "presets": studies.presets,
+        "intensities": studies.intensities,
+    }
+    known = [*by_name, "realizations"]
+    problems = [
+        "" if name in known else f"unknown study {name!r}; use {', '.join(known)}",
+        "" if known_kind(kind) else f"--kind: unknown kind {kind!r}",
+        "" if known_kind(source_filter) else f"--source-filter: unknown {source_filter!r}",
+        "" if realizations >= 2 else "--realizations must be at least 2",
+    ]
+    if any(problems):
+        console.print(f"[red]error:[/red] {'; '.join(p for p in problems if p)}")
+        raise typer.Exit(2)
+    setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
+    total = runs * (realizations if name == "realizations" else 1)
+    with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
+        task = bar.add_task(name, total=None)
+        runner = studies.Runner(lambda n: bar.advance(task, n), workers, batch_size, executor)
+        try:
+            if name == "realizations":
+                names = [f.strip() for f in filters.split(",") if f.strip()]
+                path = studies.realizations(setting, runner, out, count=realizations, filters=names)
+            else:
+                path = by_name[name](setting, runner, out)
+        except ValueError as err:  # a refused configuration or filter
+            console.print(f"[red]error:[/red] {err}")
+            raise typer.Exit(2) from None
+    console.print(Path(path).read_text(), markup=False)
+    console.print(f"wrote {path}")
