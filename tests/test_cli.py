@@ -2,7 +2,8 @@ import json
 import re
 
 import pytest
-from tltrack.app.cli import _print_table, app
+from tltrack.app import app
+from tltrack.app.experiment import _print_table
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
