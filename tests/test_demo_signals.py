@@ -212,7 +212,7 @@ def test_a_process_whose_close_never_ends_still_ends_soon_after_a_stop_signal(
     close: str, rc: int
 ) -> None:
     """The bound behind the 10 s above: a close stuck past the grace period ends the process."""
-    code = f"from tltrack.wire.transport import exit_unless_stopped as x\nx(15, 0.5)\n{close}"
+    code = f"from tltrack.live.supervisor import exit_unless_stopped as x\nx(15, 0.5)\n{close}"
     t0 = time.monotonic()
     assert subprocess.run([sys.executable, "-c", code], timeout=20).returncode == rc
     assert time.monotonic() - t0 < 15

@@ -24,6 +24,7 @@ import pytest
 import zenoh
 from doubles import RADAR
 from security_helpers import make_certs
+from tltrack.live.router import background_router
 from tltrack.wire import keys
 from tltrack.wire.messages import Measurement, RejectCounter, Transfer, decode, encode
 from tltrack.wire.transport import (
@@ -33,7 +34,6 @@ from tltrack.wire.transport import (
     Received,
     Subscriber,
     ZenohSettings,
-    background_router,
     declare_token,
     open_session,
     query,
@@ -281,7 +281,8 @@ class Child:
 
 ROUTER_CODE = """
     import json, sys
-    from tltrack.wire.transport import ZenohSettings, run_router
+    from tltrack.live.router import run_router
+    from tltrack.wire.transport import ZenohSettings
     settings = ZenohSettings(**json.loads(sys.argv[2]))
     run_router([sys.argv[1]], settings)
     print("router exited cleanly", flush=True)

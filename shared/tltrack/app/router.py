@@ -37,8 +37,9 @@ def router(
     import tempfile
 
     from tltrack.live import topology
+    from tltrack.live.router import run_router
     from tltrack.wire import keys
-    from tltrack.wire.transport import ZenohSettings, run_router
+    from tltrack.wire.transport import ZenohSettings
 
     if operator is not None and not (
         operator in (keys.REFEREE, keys.PRIMARY)

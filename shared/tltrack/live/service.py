@@ -25,6 +25,7 @@ import zenoh
 from pydantic import ValidationError
 from pydantic_settings import BaseSettings
 from tltrack.config import describe_validation_error, plugins
+from tltrack.live.supervisor import exit_unless_stopped
 from tltrack.wire import keys
 from tltrack.wire.messages import Message, RejectCounter
 from tltrack.wire.transport import (
@@ -33,7 +34,6 @@ from tltrack.wire.transport import (
     Subscriber,
     ZenohSettings,
     declare_token,
-    exit_unless_stopped,
     open_session,
     query,
 )

@@ -1,8 +1,10 @@
-"""``tltrack demo``: the routers (one per operator, or one for all: :mod:`tltrack.live.topology`)
-and the services as separate processes on loopback, one episode, the scorer's summary, and a
-clean shutdown (no orphan, no hang).
+"""Process supervision and stop signals: the routers (one per operator, or one for all:
+:mod:`tltrack.live.topology`) and the services as separate processes (:class:`Stack`, what
+``tltrack demo`` runs), and how every process of the product stops.
 
-Children never outlive the command that started them. Whatever stops it:
+A service or router given a stop signal closes gracefully, and ends anyway after a grace
+(:func:`exit_unless_stopped`). Children never outlive the command that started them. Whatever
+stops it:
 
 - SIGTERM, SIGHUP or SIGINT (even in a background job, whose SIGINT a shell sets to ignored):
   :func:`stop_on_signals` turns each into :class:`Interrupted` in the main thread, and
@@ -17,10 +19,12 @@ import contextlib
 import ctypes
 import ctypes.util
 import json
+import math
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -97,6 +101,26 @@ def router_access_env(access: Path = ACCESS_DIR) -> dict[str, str]:
 
 
 # ---- stopping -----------------------------------------------------------------------------------
+
+#: how long a process may take to close after a stop signal before it exits anyway
+STOP_GRACE_S = 5.0
+
+
+def exit_unless_stopped(signum: int, grace_s: float = STOP_GRACE_S) -> None:
+    """Called on a stop signal: end the process in ``grace_s`` if its graceful close has not.
+
+    A close normally takes well under a second, but a BLOCK put towards a router that is itself
+    going away can wait for seconds, and a process that outlives its stop is an orphan. What is
+    committed is durable (the scorer's rows survive kill -9), so ending it then loses nothing.
+
+    The timer is a Python thread, so it cannot run while a native call holds the GIL; a second
+    later the kernel ends the process anyway (``alarm``: SIGALRM's default action), whatever the
+    interpreter is doing.
+    """
+    timer = threading.Timer(grace_s, os._exit, args=(128 + signum,))
+    timer.daemon = True
+    timer.start()
+    signal.alarm(math.ceil(grace_s) + 1)
 
 
 class Interrupted(BaseException):

@@ -1,6 +1,6 @@
-"""Zenoh plumbing: settings, sessions, queued subscribers, blocking publishers, liveliness, router.
+"""Zenoh plumbing: settings, sessions, queued subscribers, blocking publishers, liveliness.
 
-All services talk through one Python-hosted router (``tltrack router`` / :func:`run_router`);
+All services talk through Python-hosted routers (``tltrack router``, :mod:`tltrack.live.router`);
 docs/background.md, section "Zenoh", lists the measured behaviour this module relies on:
 
 - clients connect to explicit endpoints with ``connect/timeout_ms: -1`` (wait for the router) and
@@ -18,16 +18,12 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import math
-import os
-import signal
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import FrameType
 from typing import Annotated, Any, Literal, TypeVar
 
 import zenoh
@@ -550,100 +546,3 @@ class LivelinessWatcher:
 
 
 # ---- router -----------------------------------------------------------------------------------
-
-
-#: how long a process may take to close after a stop signal before it exits anyway
-STOP_GRACE_S = 5.0
-
-
-def exit_unless_stopped(signum: int, grace_s: float = STOP_GRACE_S) -> None:
-    """Called on a stop signal: end the process in ``grace_s`` if its graceful close has not.
-
-    A close normally takes well under a second, but a BLOCK put towards a router that is itself
-    going away can wait for seconds, and a process that outlives its stop is an orphan. What is
-    committed is durable (the scorer's rows survive kill -9), so ending it then loses nothing.
-
-    The timer is a Python thread, so it cannot run while a native call holds the GIL; a second
-    later the kernel ends the process anyway (``alarm``: SIGALRM's default action), whatever the
-    interpreter is doing.
-    """
-    timer = threading.Timer(grace_s, os._exit, args=(128 + signum,))
-    timer.daemon = True
-    timer.start()
-    signal.alarm(math.ceil(grace_s) + 1)
-
-
-def run_router(
-    listen: list[str],
-    settings: ZenohSettings | None = None,
-    *,
-    connect: list[str] | None = None,
-    stop: threading.Event | None = None,
-    on_ready: Callable[[zenoh.Session], None] | None = None,
-    announce: bool = True,
-) -> None:
-    """Run a Zenoh router on ``listen`` until SIGINT/SIGTERM (or ``stop`` is set), then close it.
-
-    ``settings`` supplies security options (TLS, user/password dictionary, access control); its
-    mode and endpoints are replaced. ``connect`` lists other routers to mesh with. With
-    ``announce`` a line ``tltrack router <zid> listening on <endpoints>`` goes to stdout once the
-    router is listening. Signal handlers are installed only when called from the main thread.
-    """
-    if not listen:
-        raise ValueError("a router needs at least one listen endpoint")
-    base = settings or ZenohSettings()
-    cfg = base.model_copy(
-        update={"mode": "router", "listen": list(listen), "endpoints": list(connect or [])}
-    )
-    stop = stop or threading.Event()
-
-    previous: dict[signal.Signals, Any] = {}
-    if threading.current_thread() is threading.main_thread():
-
-        def _handler(signum: int, _frame: FrameType | None) -> None:
-            if not stop.is_set():
-                exit_unless_stopped(signum)
-            stop.set()
-
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            previous[sig] = signal.signal(sig, _handler)
-    try:
-        with zenoh.open(cfg.to_config()) as session:
-            if announce:
-                print(
-                    f"tltrack router {session.zid()} listening on {', '.join(listen)}", flush=True
-                )
-            if on_ready is not None:
-                on_ready(session)
-            while not stop.wait(0.2):
-                pass
-            log.info("router stopping")
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-
-@contextlib.contextmanager
-def background_router(listen: list[str], settings: ZenohSettings | None = None) -> Iterator[None]:
-    """Run :func:`run_router` in a thread for the duration of a ``with`` block (tests, demos)."""
-    stop = threading.Event()
-    ready = threading.Event()
-    errors: list[BaseException] = []
-
-    def target() -> None:
-        try:
-            run_router(listen, settings, stop=stop, on_ready=lambda _s: ready.set(), announce=False)
-        except BaseException as err:
-            errors.append(err)
-            ready.set()
-
-    thread = threading.Thread(target=target, name="tltrack-router", daemon=True)
-    thread.start()
-    ready.wait()
-    if errors:
-        raise errors[0]
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join(timeout=10)
