@@ -9,8 +9,9 @@
 #   router.pem/.key   the router's certificate (the referee's, in the federated topology); its
 #                     names are localhost, 127.0.0.1 and every ROUTER_HOST (a DNS name or an IP
 #                     address the clients connect to)
-#   NAME.pem/.key     one certificate per identity in $TLTRACK_CERT_NAMES (default "sensor
-#                     referee primary source-s1 dashboard router-primary router-source-s1"),
+#   NAME.pem/.key     one certificate per identity in $TLTRACK_CERT_NAMES (default: every
+#                     identity of the operator manifest, as the package's users.txt and
+#                     routers/users.txt list them: `tltrack access generate` writes both),
 #                     common name = NAME: with mutual TLS the router's ACL
 #                     (shared/tltrack/access/acl.json5) knows the operator by it. A `router-*`
 #                     name is an operator's router of the federated topology: it both listens
@@ -26,7 +27,8 @@ set -euo pipefail
 out=${1:-deploy/certs}
 shift || true
 days=${TLTRACK_CERT_DAYS:-30}
-names=${TLTRACK_CERT_NAMES:-sensor referee primary source-s1 dashboard router-primary router-source-s1}
+access="$(cd "$(dirname "$0")/.." && pwd)/shared/tltrack/access"
+names=${TLTRACK_CERT_NAMES:-$(cut -d: -f1 "$access/users.txt" "$access/routers/users.txt")}
 
 command -v openssl >/dev/null || { echo "make_certs.sh: needs the openssl command" >&2; exit 1; }
 mkdir -p "$out"

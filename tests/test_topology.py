@@ -7,8 +7,16 @@ import json
 
 import pytest
 import zenoh
-from tltrack.live import topology
-from tltrack.live.topology import access_env, federated, identity_operator, passwords, router_argv
+from tltrack.live.access import ACCESS_DIR, router_env
+from tltrack.live.manifest import load_manifest
+from tltrack.live.supervisor import passwords
+from tltrack.live.topology import federated, identity_operator, router_argv
+
+MANIFEST = load_manifest()
+
+
+def access_env(operator: str, out):
+    return router_env(MANIFEST, operator, out)
 
 pytestmark = pytest.mark.unit
 
@@ -72,13 +80,9 @@ def test_each_router_knows_its_services_and_the_routers_that_dial_it(
 
 
 def test_the_routers_rules_ship_with_the_package() -> None:
-    routers = topology.ACCESS_DIR / "routers"
-    assert {p.name for p in routers.iterdir()} >= {
-        "referee.json5",
-        "primary.json5",
-        "source.json5",
-        "users.txt",
-    }
+    routers = ACCESS_DIR / "routers"
+    assert {p.name for p in routers.iterdir()} >= {"referee.json5", "primary.json5", "users.txt"}
+    assert (ACCESS_DIR / "templates" / "routers" / "source.json5").is_file()
 
 
 def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:

@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
+from tltrack.app.access import ManifestOption, manifest_or_exit
 from tltrack.app.common import (
     app,
     build_config,
@@ -46,6 +47,7 @@ def demo(
     topology: Annotated[
         TopologyKind, typer.Option(help="a router per operator (federated), or one for all")
     ] = "federated",
+    manifest: ManifestOption = None,
 ) -> None:
     """Start the routers, the scorer, the trackers, the sensors and sensor_sim on loopback, run
     one episode, print the summary.
@@ -54,8 +56,8 @@ def demo(
     N = 6000 (the values in brackets); with it, the file's values, unless an option overrides
     them. Federated: one router per operator (referee, primary, each source), each letting out
     only what its owner shares; single: one router for all. The routers enforce the package's
-    access control; every service runs as its operator. Any stop signal (or the death of this
-    process) stops every process it started.
+    access control, from the operator manifest; every service runs as its operator. Any stop
+    signal (or the death of this process) stops every process it started.
     """
     from tltrack.live import supervisor as d
 
@@ -64,14 +66,16 @@ def demo(
         steps, particles, seed = steps or 100, particles or 6000, seed or 0
     cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
     try:
-        d.check_access(cfg)
+        d.check_access(manifest_or_exit(manifest), cfg)
     except d.AccessControlMissingError as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:
         with d.stop_on_signals():
-            summary = _run_demo(d, cfg, flags, pace, realtime, out, serve, port, host, topology)
+            summary = _run_demo(
+                d, cfg, flags, pace, realtime, out, serve, port, host, topology, manifest
+            )
     except d.Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
@@ -92,6 +96,7 @@ def _run_demo(
     port: int,
     host: str,
     kind: TopologyKind = "federated",
+    manifest: Path | None = None,
 ) -> dict[str, Any]:
     """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
     ``topology`` set."""
@@ -109,7 +114,7 @@ def _run_demo(
         f"{d.ACCESS_DIR}); logs in {out / 'logs'}"
     )
     warm_up()  # compile the kernels once here, not in several services at once
-    with d.Stack(endpoint, out / "logs", secure=True, topology=topo) as stack:
+    with d.Stack(endpoint, out / "logs", True, topology=topo, manifest_file=manifest) as stack:
         stack.start_router()
         stack.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         wait_for = stack.start_trackers(cfg)
@@ -131,9 +136,10 @@ def _run_demo(
         K = cfg.K
         budget = K * (cfg.Ts if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
         with progress_bar(K, "episode") as bar:
-            task = bar.add_task("episode", total=None)
-            rc = stack.wait("sensor_sim", budget)
-            bar.update(task, completed=K, total=K)
+            task = bar.add_task("episode", total=K)
+            rc = d.wait_for_episode(stack, budget, lambda k: bar.update(task, completed=k))
+            if rc == 0:  # its last statistics may precede its last steps by up to a second
+                bar.update(task, completed=K)
         if rc != 0:
             console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from tltrack.app.access import ManifestOption, manifest_or_exit
 from tltrack.app.common import (
     app,
     console,
@@ -23,9 +24,11 @@ def router(
         str | None,
         typer.Option(
             help="be this operator's router of the federated topology (referee, primary, "
-            "source/<id>): the package's ACL and dictionary for it, dialling as router-<operator>"
+            "source/<id>, as the operator manifest lists them): its ACL and dictionary, dialling "
+            "as router-<operator>"
         ),
     ] = None,
+    manifest: ManifestOption = None,
 ) -> None:
     """Run a Zenoh router (the Python package in router mode) until Ctrl-C or SIGTERM.
 
@@ -36,19 +39,18 @@ def router(
     import os
     import tempfile
 
-    from tltrack.live import topology
+    from tltrack.live import access
+    from tltrack.live.manifest import ManifestError
     from tltrack.live.router import run_router
-    from tltrack.wire import keys
     from tltrack.wire.transport import ZenohSettings
 
-    if operator is not None and not (
-        operator in (keys.REFEREE, keys.PRIMARY)
-        or f"router-{operator.replace('/', '-')}" in topology.all_passwords()
-    ):
-        console.print(f"[red]error:[/red] --operator: unknown operator {operator!r}")
-        raise typer.Exit(2)
     with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
         if operator is not None:
-            for name, value in topology.access_env(operator, Path(tmp)).items():
+            try:
+                env = access.router_env(manifest_or_exit(manifest), operator, Path(tmp))
+            except ManifestError as err:
+                console.print(f"[red]error:[/red] --operator: {err}")
+                raise typer.Exit(2) from None
+            for name, value in env.items():
                 os.environ.setdefault(name, value)
         run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)

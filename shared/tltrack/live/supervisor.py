@@ -34,70 +34,57 @@ from typing import IO, Any
 
 import zenoh
 from tltrack.config import Config, plugins
-from tltrack.live import topology
-from tltrack.live.topology import ACCESS_DIR, Topology
+from tltrack.live import access, topology
+from tltrack.live.access import ACCESS_DIR
+from tltrack.live.manifest import DEFAULT, REFEREE_SERVICES, Manifest, load_manifest
+from tltrack.live.manifest import ENV as MANIFEST_ENV
+from tltrack.live.topology import Topology
 from tltrack.live.topology import free_port as free_port
 from tltrack.wire import keys
-from tltrack.wire.transport import Publisher, ZenohSettings, open_session, query
+from tltrack.wire.transport import Publisher, Subscriber, ZenohSettings, open_session, query
 
 #: the signals that stop a command and every process it started
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-#: the identity each service runs under (README: who may read what)
+#: the identity each service runs under (README: who may read what); a source's tracker runs
+#: as its own operator, ``source-<id>`` (here the first source of the package's manifest)
 IDENTITY = {
-    "sensor_sim": "sensor",
-    "scorer": "referee",
-    "primary_tracker": "primary",
-    "source_tracker": "source-s1",
-    "dashboard": "dashboard",
+    **REFEREE_SERVICES,
+    "primary_tracker": keys.PRIMARY,
+    "source_tracker": f"source-{load_manifest(DEFAULT).source_ids[0]}",
 }
 
 
 class AccessControlMissingError(RuntimeError):
-    """The package's ACL or password file is gone: the demo refuses to run an open router."""
+    """The manifest does not know an operator: the demo refuses to run a router that does not
+    know whom to let in."""
 
 
-def check_access(cfg: Config | None = None, access: Path = ACCESS_DIR) -> None:
-    """Raise :class:`AccessControlMissingError` unless the ACL and password file are readable
-    and know every source operator of ``cfg``."""
-    for name in ("acl.json5", "users.txt"):
-        if not (access / name).is_file():
-            raise AccessControlMissingError(
-                f"{access / name} is missing: the demo will not run a router without access "
-                "control (reinstall tltrack to restore the package's access/ files)"
-            )
-    known = topology.all_passwords(access)
-    unknown = [
-        s.id
-        for s in (cfg.sources if cfg else [])
-        if not {f"source-{s.id}", f"router-source-{s.id}"} <= known.keys()
-    ]
+def check_access(manifest: Manifest, cfg: Config | None = None) -> None:
+    """Raise :class:`AccessControlMissingError` unless the manifest lists every source operator
+    of ``cfg``."""
+    unknown = [s.id for s in (cfg.sources if cfg else []) if s.id not in manifest.source_ids]
     if unknown:
-        ids = sorted(u.removeprefix("source-") for u in known if u.startswith("source-"))
         raise AccessControlMissingError(
-            f"the shipped access control knows sources {', '.join(ids)}, not {unknown}: "
-            "rename the sources, or add them (deploy/zenoh/README.md)"
+            f"the operator manifest lists sources {', '.join(manifest.source_ids)}, not "
+            f"{', '.join(unknown)}: rename the sources, or add them to the manifest "
+            f"(--manifest FILE; the package's is {DEFAULT})"
         )
 
 
 def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
     """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
-    return topology.passwords(users)
+    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
+    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
 
 
-def identity_env(user: str, users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
-    """The environment that makes a service connect as ``user``."""
+def identity_env(user: str, users: Path | None = None) -> dict[str, str]:
+    """The environment that makes a service connect as ``user``: its demo password, or the one
+    of the dictionary ``users``."""
+    if users is None:
+        return access.identity_env(user)
     return {"TLTRACK_ZENOH_USERNAME": user, "TLTRACK_ZENOH_PASSWORD": passwords(users)[user]}
-
-
-def router_access_env(access: Path = ACCESS_DIR) -> dict[str, str]:
-    """The router's environment for enforcing the ACL (for the router only: a client given it
-    would apply the ACL to its own link and deny itself)."""
-    return {
-        "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(access / "acl.json5"),
-        "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(access / "users.txt"),
-    }
 
 
 # ---- stopping -----------------------------------------------------------------------------------
@@ -206,6 +193,9 @@ class Stack:
     secure: bool = False
     env: dict[str, str] = field(default_factory=dict)
     topology: Topology | None = None
+    #: the operator manifest (None: $TLTRACK_MANIFEST or the package's); the routers it starts
+    #: read the same file
+    manifest_file: Path | None = None
     procs: dict[str, subprocess.Popen[bytes]] = field(default_factory=dict)
     _files: list[IO[bytes]] = field(default_factory=list)
 
@@ -214,6 +204,9 @@ class Stack:
             self.topology = topology.single(self.endpoint)
         self.endpoint = self.topology.referee.endpoint
         self.secure = self.secure or self.federated
+        self.manifest = load_manifest(self.manifest_file)
+        if self.manifest_file is not None:
+            self.env = {MANIFEST_ENV: str(Path(self.manifest_file).resolve()), **self.env}
 
     @property
     def federated(self) -> bool:
@@ -244,8 +237,8 @@ class Stack:
     def start_router(self) -> None:
         """The router (single), or every operator's router (federated: ``router_<operator>``)."""
         if not self.federated:
-            access = router_access_env() if self.secure else {}
-            self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], access)
+            env = access.single_env(self.manifest, self.logs / "access") if self.secure else {}
+            self.start("router", ["-m", "tltrack", "router", "--listen", self.endpoint], env)
             return
         assert self.topology is not None
         for r in self.topology.routers.values():  # the dialled before those that dial them
@@ -304,9 +297,8 @@ class Stack:
         if self.federated:
             wait += self.start_sensors(cfg)
         for src in cfg.sources:
-            one = len(cfg.sources) == 1 and src.id == "s1"
             self.start_service(
-                "source_tracker" if one else f"source_tracker_{src.id}",
+                self.manifest.tracker_service(src.id),
                 service="source_tracker",
                 identity=f"source-{src.id}",
                 env={"TLTRACK_SOURCE_SOURCE_ID": src.id},
@@ -411,7 +403,7 @@ def client(endpoint: str, user: str | None = None) -> Iterator[zenoh.Session]:
     """A client session, under identity ``user`` when the router enforces the ACL."""
     creds: dict[str, Any] = {}
     if user is not None:
-        creds = {"username": user, "password": passwords()[user]}
+        creds = {"username": user, "password": Manifest.password(user)}
     with open_session(ZenohSettings(endpoints=[endpoint], **creds)) as session:
         yield session
 
@@ -438,6 +430,22 @@ def wait_for_scored(
                     return s
             time.sleep(0.2)
     return None
+
+
+def wait_for_episode(stack: Stack, timeout: float, on_step: Callable[[int], None]) -> int | None:
+    """Wait up to ``timeout`` for sensor_sim to end its episode, telling ``on_step`` of each step
+    it reports (its statistics, once a second, read as the referee); its exit code, or None."""
+    deadline = time.monotonic() + timeout
+    sim = stack.procs["sensor_sim"]
+    with (
+        client(stack.endpoint, keys.REFEREE if stack.secure else None) as session,
+        Subscriber(session, [keys.stats(keys.REFEREE, "sensor_sim")]) as stats,
+    ):
+        while (code := sim.poll()) is None and time.monotonic() < deadline:
+            item = stats.recv(0.2)
+            if item is not None:
+                on_step(int(json.loads(item.payload).get("counters", {}).get("steps", 0)))
+    return code if code is not None else stack.wait("sensor_sim", 0.0)
 
 
 def serve_until_interrupted(stack: Stack, name: str) -> None:

@@ -11,7 +11,8 @@ topology (README, "The live dual tracker"; deploy/zenoh/README.md has the rules 
   out raw measurements, and no router forwards one operator's traffic to another.
 
 A router dials others under its own identity, ``router-<operator>``; the routers it listens for
-know that name and password (``access/routers/users.txt``), beside its own services' identities.
+know that name and password, beside its own services' identities (:mod:`tltrack.live.access`
+writes each router's rules and dictionary from the operator manifest).
 """
 
 from __future__ import annotations
@@ -19,15 +20,13 @@ from __future__ import annotations
 import contextlib
 import socket
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Literal
 
+from tltrack.live.manifest import REFEREE_SERVICES
 from tltrack.wire import keys
 
 Kind = Literal["single", "federated"]
 TOPOLOGIES: tuple[Kind, ...] = ("federated", "single")
-
-ACCESS_DIR = Path(__file__).resolve().parents[1] / "access"
 
 
 def free_port() -> int:
@@ -45,7 +44,7 @@ def free_ports(n: int) -> list[int]:
 
 def identity_operator(identity: str) -> str:
     """The operator whose router a service under ``identity`` logs in to."""
-    if identity in ("sensor", "referee", "dashboard"):
+    if identity in REFEREE_SERVICES.values():
         return keys.REFEREE
     if identity.startswith("source-"):
         return keys.source_operator(identity.removeprefix("source-"))
@@ -73,13 +72,6 @@ class Router:
     def user(self) -> str:
         """The identity it dials other routers under."""
         return f"router-{self.name}"
-
-    @property
-    def local_identities(self) -> tuple[str, ...]:
-        """The identities of its owner's services."""
-        if self.operator == keys.REFEREE:
-            return ("sensor", "referee", "dashboard")
-        return (self.name,)
 
 
 @dataclass(frozen=True)
@@ -129,59 +121,6 @@ def build(kind: Kind, source_ids: list[str]) -> Topology:
 def describe(topology: Topology) -> str:
     """One line: which router listens where."""
     return ", ".join(f"{r.name} {r.endpoint}" for r in topology.routers.values())
-
-
-# ---- per-router configuration -------------------------------------------------------------------
-
-
-def passwords(users: Path) -> dict[str, str]:
-    """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
-    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
-    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
-
-
-def all_passwords(access: Path = ACCESS_DIR) -> dict[str, str]:
-    """Every service's and every router's password."""
-    return {**passwords(access / "users.txt"), **passwords(access / "routers" / "users.txt")}
-
-
-def acl_text(router: Router, access: Path = ACCESS_DIR) -> str:
-    """The router's ``access_control`` section, from the package's templates."""
-    if router.operator in (keys.PRIMARY, keys.REFEREE):
-        return (access / "routers" / f"{router.name}.json5").read_text()
-    sid = router.operator.removeprefix("source/")
-    return (access / "routers" / "source.json5").read_text().replace("SID", sid)
-
-
-def diallers(operator: str, access: Path = ACCESS_DIR) -> list[str]:
-    """The routers that may dial ``operator``'s: every operator's dials the referee's, every
-    source's the primary's."""
-    routers = passwords(access / "routers" / "users.txt")
-    if operator == keys.REFEREE:
-        return list(routers)
-    if operator == keys.PRIMARY:
-        return [u for u in routers if u.startswith("router-source-")]
-    return []
-
-
-def access_env(operator: str, out: Path, access: Path = ACCESS_DIR) -> dict[str, str]:
-    """Write ``operator``'s router ACL and password dictionary into ``out``; the environment of
-    its ``tltrack router`` (those files, and the identity it dials other routers under)."""
-    router = Router(operator, "")
-    pw = all_passwords(access)
-    known = [*router.local_identities, *diallers(operator, access)]
-    out.mkdir(parents=True, exist_ok=True)
-    acl, users = out / f"{router.name}.acl.json5", out / f"{router.name}.users.txt"
-    acl.write_text(acl_text(router, access))
-    users.write_text("".join(f"{u}:{pw[u]}\n" for u in known))
-    users.chmod(0o600)
-    env = {
-        "TLTRACK_ZENOH_ACCESS_CONTROL_FILE": str(acl),
-        "TLTRACK_ZENOH_USRPWD_DICTIONARY_FILE": str(users),
-    }
-    if operator != keys.REFEREE:
-        env |= {"TLTRACK_ZENOH_USERNAME": router.user, "TLTRACK_ZENOH_PASSWORD": pw[router.user]}
-    return env
 
 
 def router_argv(topology: Topology, router: Router) -> list[str]:

@@ -1,0 +1,76 @@
+"""``tltrack access``: the operator manifest, and the access files that follow from it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from tltrack.app.common import app, console
+
+if TYPE_CHECKING:
+    from tltrack.live.manifest import Manifest
+
+access_app = typer.Typer(help="The operator manifest and the access files that follow from it.")
+app.add_typer(access_app, name="access")
+
+#: ``--manifest``, shared by the commands that read the operator manifest
+ManifestOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--manifest",
+        envvar="TLTRACK_MANIFEST",
+        help="the operator manifest (TOML; default: the package's access/operators.toml)",
+    ),
+]
+
+
+def manifest_or_exit(path: Path | None) -> Manifest:
+    """The manifest, or exit 2 with the reason."""
+    from tltrack.live.manifest import ManifestError, load_manifest
+
+    try:
+        return load_manifest(path)
+    except ManifestError as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+
+
+@access_app.command()
+def show(manifest: ManifestOption = None) -> None:
+    """Every operator of the manifest: its role, its identities and its router."""
+    from rich.table import Table
+
+    m = manifest_or_exit(manifest)
+    t = Table(title="operators")
+    for col in ("role", "operator", "identities", "router dials as"):
+        t.add_column(col)
+    for op in m.operators:
+        t.add_row(op.role, op.path, ", ".join(op.identities), op.router_identity or "-")
+    console.print(t)
+
+
+@access_app.command()
+def generate(
+    manifest: ManifestOption = None,
+    root: Annotated[Path, typer.Option(help="the repository to write into")] = Path("."),
+    check: Annotated[bool, typer.Option(help="only say which files are out of date")] = False,
+) -> None:
+    """Write the repository's files that follow from the manifest: the package's access control
+    and password files, and compose.yaml (from deploy/compose.template.yaml)."""
+    from tltrack.live import access
+
+    m = manifest_or_exit(manifest)
+    if not (root / "deploy" / "compose.template.yaml").is_file():
+        console.print(f"[red]error:[/red] {root.resolve()} is not a tltrack repository")
+        raise typer.Exit(2)
+    out_of_date = access.stale(m, root)
+    if check:
+        for p in out_of_date:
+            console.print(f"out of date: {p}")
+        raise typer.Exit(1 if out_of_date else 0)
+    for p, text in access.repository_files(m, root).items():
+        if p in out_of_date:
+            p.write_text(text)
+            console.print(f"wrote {p}")
