@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import buildlock
 import numpy as np
 import pytest
 import yaml
@@ -161,26 +162,36 @@ def _image_id() -> str | None:
     return proc.stdout.strip() if proc.returncode == 0 else None
 
 
+#: TLTRACK_TEST_REBUILD_IMAGE=1 forces one build per test run: the first test process to get here
+#: builds, and leaves this mark (its pytest run's id) so that the others reuse what it built
+RUN_ID = os.environ.get("PYTEST_XDIST_TESTRUNUID") or str(os.getpid())
+
+
 @pytest.fixture(scope="module")
 def image(compose: list[str]) -> str:
-    digest = _sources_digest()
-    current = _image_id()
-    stamp = STAMP.read_text().split() if STAMP.exists() else []
-    if (
-        current is not None
-        and stamp == [current, digest]
-        and os.environ.get("TLTRACK_TEST_REBUILD_IMAGE") != "1"
-    ):
-        print(f"reusing {IMAGE} ({current[:19]}): sources unchanged since it was built")
+    # Under pytest-xdist each test process reaches this fixture (test_compose, test_dask): the
+    # build lock makes the second wait for the first's build, and the stamp then lets it reuse it.
+    with buildlock.held(f"the image {IMAGE}"):
+        digest = _sources_digest()
+        current = _image_id()
+        stamp = STAMP.read_text().split() if STAMP.exists() else []
+        forced = os.environ.get("TLTRACK_TEST_REBUILD_IMAGE") == "1"
+        built_by_this_run = stamp[2:] == [RUN_ID]
+        if (
+            current is not None
+            and stamp[:2] == [current, digest]
+            and (not forced or built_by_this_run)
+        ):
+            print(f"reusing {IMAGE} ({current[:19]}): sources unchanged since it was built")
+            return IMAGE
+        t0 = time.monotonic()
+        _run([str(ROOT / "scripts" / "build_image.sh")], timeout=1500)
+        print(f"built {IMAGE} in {time.monotonic() - t0:.0f} s")
+        built = _image_id()
+        assert built is not None, f"scripts/build_image.sh left no {IMAGE}"
+        STAMP.parent.mkdir(parents=True, exist_ok=True)
+        STAMP.write_text(f"{built} {digest} {RUN_ID}\n")
         return IMAGE
-    t0 = time.monotonic()
-    _run([str(ROOT / "scripts" / "build_image.sh")], timeout=1500)
-    print(f"built {IMAGE} in {time.monotonic() - t0:.0f} s")
-    built = _image_id()
-    assert built is not None, f"scripts/build_image.sh left no {IMAGE}"
-    STAMP.parent.mkdir(parents=True, exist_ok=True)
-    STAMP.write_text(f"{built} {digest}\n")
-    return IMAGE
 
 
 # ---- the stack ---------------------------------------------------------------------------------

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import buildlock
 import pytest
 
 pytestmark = pytest.mark.system
@@ -27,18 +29,20 @@ def run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProce
 @pytest.fixture(scope="module")
 def venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh venv with only the wheel (and its pinned dependencies) installed."""
-    build = run(
-        ["bash", str(ROOT / "scripts" / "build_wheels.sh"), str(WHEELS)],
-        ROOT,
-        timeout=900,
-    )
-    assert build.returncode == 0, build.stderr
-    made = sorted(p.name for p in (WHEELS / "app").iterdir())
-    assert len(made) == 2 and made[0].endswith(".whl") and made[1].endswith(".tar.gz"), made
     where = tmp_path_factory.mktemp("fresh")
+    # the image's build (tests/test_compose.py) writes build/wheels too, maybe at this moment
+    with buildlock.held("the wheel"):
+        build = run(
+            ["bash", str(ROOT / "scripts" / "build_wheels.sh"), str(WHEELS)],
+            ROOT,
+            timeout=900,
+        )
+        assert build.returncode == 0, build.stderr
+        made = sorted(p.name for p in (WHEELS / "app").iterdir())
+        assert len(made) == 2 and made[0].endswith(".whl") and made[1].endswith(".tar.gz"), made
+        wheel = shutil.copy(WHEELS / "app" / made[0], where)  # (app/ is rebuilt by each build)
     subprocess.run([sys.executable, "-m", "venv", str(where / "venv")], check=True)
     pip = str(where / "venv" / "bin" / "pip")
-    wheel = str(WHEELS / "app" / made[0])
     install = run([pip, "install", "--no-index", "-q", *FROM_WHEELHOUSE, wheel], where, 600)
     assert install.returncode == 0, install.stderr
     return where / "venv"
