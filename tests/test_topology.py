@@ -18,6 +18,7 @@ MANIFEST = load_manifest()
 def access_env(operator: str, out):
     return router_env(MANIFEST, operator, out)
 
+
 pytestmark = pytest.mark.unit
 
 
