@@ -44,7 +44,8 @@ from tltrack.live.supervisor import IDENTITY, passwords
 from tltrack.wire import keys
 from tltrack.wire.transport import Subscriber, ZenohSettings, open_session, query
 
-pytestmark = [pytest.mark.system, pytest.mark.timeout(900)]
+# one test process runs the whole module: its stack (a module fixture) is started once
+pytestmark = [pytest.mark.system, pytest.mark.timeout(900), pytest.mark.xdist_group("compose")]
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE_FILE = ROOT / "compose.yaml"

@@ -270,6 +270,12 @@ def reference() -> dict[str, FilterResult]:
     return run_experiment(small(), FILTERS, batch_size=3, workers=2, time_steps=False)
 
 
+#: the tests on :func:`two_workers` run in one test process, so that its cluster (whose worker A
+#: compiles every kernel) starts once
+ON_TWO_WORKERS = pytest.mark.xdist_group("dask")
+
+
+@ON_TWO_WORKERS
 @pytest.mark.integration
 def test_scheduler_gives_the_local_pools_results_with_batches_on_both_workers(
     two_workers, reference, tmp_path
@@ -312,6 +318,7 @@ def test_scheduler_gives_the_local_pools_results_with_batches_on_both_workers(
     assert {p.name: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")} == index
 
 
+@ON_TWO_WORKERS
 @pytest.mark.integration
 def test_a_worker_killed_mid_sweep_costs_only_its_batches(two_workers, reference):
     """Only B's batches run again: those it was running, and those it had finished whose
@@ -452,6 +459,7 @@ def mc_cluster(compose: list[str], image: str) -> Iterator[Mc]:  # noqa: F811
 
 
 @pytest.mark.timeout(900)
+@pytest.mark.xdist_group("compose")  # after or before test_compose's stack, never beside it
 @pytest.mark.system
 def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_cluster, tmp_path):
     """A small `tltrack reproduce --table2-pf-only` against the profile's scheduler, from a

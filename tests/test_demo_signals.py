@@ -109,12 +109,18 @@ def stop_and_check(
         assert committed_rows(db) >= rows
 
 
+#: the tests that stop a whole demo stack, each within a time limit: never beside another stack
+LIVE = pytest.mark.xdist_group("live")
+
+
+@LIVE
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL])
 def test_a_signal_to_the_demo_stops_every_process_it_started(sig: int, tmp_path: Path) -> None:
     proc = start(DEMO, tmp_path)
     stop_and_check(proc, sig, tmp_path / "out" / "scorer.sqlite", tmp_path)
 
 
+@LIVE
 def test_sigterm_to_the_demo_with_its_dashboard_stops_everything(tmp_path: Path) -> None:
     port = str(_free_port())
     proc = start(
@@ -124,6 +130,7 @@ def test_sigterm_to_the_demo_with_its_dashboard_stops_everything(tmp_path: Path)
     stop_and_check(proc, signal.SIGTERM, tmp_path / "out" / "scorer.sqlite", tmp_path)
 
 
+@LIVE
 def test_sigterm_to_bench_live_stops_every_process_it_started(tmp_path: Path) -> None:
     """bench-live scores into a temporary directory (here under ``tmp_path``, via TMPDIR) that it
     removes on the way out, so only the processes are checked."""

@@ -41,7 +41,9 @@ from tltrack.live import supervisor
 from tltrack.wire import keys
 from tltrack.wire.transport import LivelinessWatcher
 
-pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
+# the fault timing (steps isolated at once, deadlines, gaps) is judged on the wall clock: never
+# beside another live stack (make test's --dist loadgroup runs the group in one test process)
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(120), pytest.mark.xdist_group("live")]
 
 N = 500
 FIRST_RUN = 2

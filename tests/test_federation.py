@@ -197,6 +197,7 @@ def _reached(db: Path, k: int, name: str = "tl-rpf") -> bool:
     return max(estimates(db).get(name, {}), default=0) >= k
 
 
+@pytest.mark.xdist_group("live")  # 20 steps a second, a 20 ms deadline: never beside a stack
 @pytest.mark.parametrize("fault", ["link-cut", "primary-router-restarts", "source-router-gone"])
 def test_faults_between_routers(tmp_path, fault):
     """Cut the source-primary link (the primary steps isolated, then transfer resumes), restart

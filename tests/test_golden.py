@@ -36,7 +36,8 @@ from typing import Any
 
 import pytest
 
-pytestmark = pytest.mark.system
+# one test process runs the module: one worktree, whose numba cache the later configs reuse
+pytestmark = [pytest.mark.system, pytest.mark.xdist_group("golden")]
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the reference commit (main on the day the engine was last validated)

@@ -60,6 +60,7 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
         assert stages["to_tracker"] > 0 and stages["step"] > 0 and stages["to_receiver"] > 0
 
 
+@pytest.mark.xdist_group("live")  # "isolated within 3 steps" at 20 steps a second
 def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
     db = tmp_path / "scorer.sqlite"
     K = 60

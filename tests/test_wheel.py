@@ -14,7 +14,8 @@ from pathlib import Path
 import buildlock
 import pytest
 
-pytestmark = pytest.mark.system
+# one test process runs the module: one wheel build and one venv
+pytestmark = [pytest.mark.system, pytest.mark.xdist_group("wheel")]
 
 ROOT = Path(__file__).resolve().parents[1]
 WHEELS = ROOT / "build" / "wheels"
