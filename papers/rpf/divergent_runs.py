@@ -5,10 +5,14 @@ the runs named by ``--runs``, in the setting the flags name), each at every part
 streams make the first count reproduce the table's own figures). ``--rerun`` reruns other
 filters than ``--filters`` on those runs (another proposal, ``proposals.py``).
 
-    .venv/bin/python benchmarks/divergent_runs.py \\
-        docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json \\
+A committed ``results.json`` has no ``run_rmse`` (papers/strip_runs.py): the per-run arrays are
+read from ``results.full.json`` beside it, which ``scripts/long_runs.sh`` leaves there, or
+``git show`` restores (papers/README.md, "Per-run arrays").
+
+    .venv/bin/python papers/rpf/divergent_runs.py \\
+        papers/rpf/results/losses-rpf-10000/arasaratnam-haykin-random/results.json \\
         [--filters rpf,tl-rpf,robust-tl-rpf] [--over 500] [--particles 6000,24000]
-    .venv/bin/python benchmarks/divergent_runs.py --runs 497,760 --preset paper --truth fixed \\
+    .venv/bin/python papers/rpf/divergent_runs.py --runs 497,760 --preset paper --truth fixed \\
         --truth-seed 1
 """
 
@@ -22,6 +26,20 @@ import numpy as np
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import run_batch
 from tltrack.filters.warm import warm_up
+
+
+def per_run(path: Path) -> Path:
+    """``path``, or the original of it that ``papers/strip_runs.py`` set aside with its arrays."""
+    if '"run_rmse"' in path.read_text():
+        return path
+    full = path.with_name(path.stem + ".full.json")
+    if full.exists():
+        return full
+    raise SystemExit(
+        f"{path} has no run_rmse, and {full.name} is not beside it: rerun its job with "
+        "scripts/long_runs.sh, or restore it from the history (papers/README.md, "
+        '"Per-run arrays"), or name the runs with --runs'
+    )
 
 
 def main() -> None:
@@ -51,7 +69,7 @@ def main() -> None:
             runs=max(runs) + 1,
         )
     elif args.results is not None:
-        results = json.loads(args.results.read_text())
+        results = json.loads(per_run(args.results).read_text())
         cfg = Config.model_validate(results["config"])
         table = results["filters"]
         runs = sorted(

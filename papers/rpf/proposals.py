@@ -1,7 +1,8 @@
-"""Two more proposals for ``rpf``, measured on the runs it loses at N = 6000 (docs/rpf.md, "Two
-more proposals"). Neither is in the product: each is a :class:`~tltrack.filters.auxiliary.Proposal`
-here, whose draw replaces the transition prior in the auxiliary filter's second stage (which then
-weighs it exactly), and a filter kind that runs ``rpf`` with it, registered on import:
+"""Two more proposals for ``rpf``, measured on the runs it loses at N = 6000 (papers/rpf/README.md,
+"Two more proposals"). Neither is in the product: each is a
+:class:`~tltrack.filters.auxiliary.Proposal` here, whose draw replaces the transition prior in the
+auxiliary filter's second stage (which then weighs it exactly), and a filter kind that runs ``rpf``
+with it, registered on import:
 
 - ``rpf-defensive``: a defensive mixture (Hesterberg 1995) on the process noise. Every M-th slot
   draws its noise at C times the prior's standard deviation (x = m + C L e); every particle is
@@ -20,11 +21,11 @@ forked with the kinds registered). Each kind draws ``rpf``'s random streams (``s
 its runs are paired with ``rpf``'s draw for draw. Usage: ``tltrack`` and a command,
 or the arguments of ``divergent_runs.py`` (its ``--rerun`` names the variants to rerun):
 
-    .venv/bin/python benchmarks/proposals.py \\
-        docs/results/long/losses-rpf-10000/arasaratnam-haykin-random/results.json \\
+    .venv/bin/python papers/rpf/proposals.py \\
+        papers/rpf/results/losses-rpf-10000/arasaratnam-haykin-random/results.json \\
         --particles 6000 --compare "" \\
         --rerun rpf-linearised,tl-rpf-linearised,robust-tl-rpf-linearised
-    .venv/bin/python benchmarks/proposals.py tltrack experiment --scenario ct \\
+    .venv/bin/python papers/rpf/proposals.py tltrack experiment --scenario ct \\
         --preset arasaratnam-haykin --truth random \\
         --filters rpf-defensive,tl-rpf-defensive,robust-tl-rpf-defensive \\
         --particles 6000 --runs 10000 --primary-intensity 4 --seed 1 --out /tmp/defensive

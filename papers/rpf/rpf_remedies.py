@@ -1,6 +1,6 @@
-"""Remedies for the bootstrap SIR's lost tracks, side by side: the table of docs/rpf.md.
+"""Remedies for the bootstrap SIR's lost tracks, side by side: the table of papers/rpf/README.md.
 
-    .venv/bin/python benchmarks/rpf_remedies.py [--runs 300] [--seed 3] [--truth-seed 0]
+    .venv/bin/python papers/rpf/rpf_remedies.py [--runs 300] [--seed 3] [--truth-seed 0]
         [--betas 0.3,1.0] [--particles 6000] [--json FILE]
 
 Every variant runs the same runs (the same per-run random streams) of the ``paper`` preset, CT,

@@ -4,7 +4,7 @@ the engine computes for it), and prints at each step the position error of the T
 source estimates, the TL cloud's effective sample size and weighted spread (position, velocity,
 turn rate), and the true and estimated turn rate.
 
-    .venv/bin/python benchmarks/trace_run.py --run 6275 [--preset arasaratnam-haykin]
+    .venv/bin/python papers/rpf/trace_run.py --run 6275 [--preset arasaratnam-haykin]
         [--truth random] [--particles 6000] [--every 1]
 """
 

@@ -1,5 +1,5 @@
 """Why does ``tl-rpf`` fed by ``source-rpf`` trail ``tl-ukf`` on one fixed truth? Two checks of
-docs/rpf.md ("The one 1000-run cell where `tl-rpf` trails `tl-ukf`"):
+papers/rpf/README.md ("The one 1000-run cell where `tl-rpf` trails `tl-ukf`"):
 
 - **Are the sources' transfers consistent?** The mean NIS of the source's next measurement
   z_{k+1} under its transfer (eta_hat_{k+1}, P_eta_eta): 2 (n_z) if P_eta_eta is honest.
@@ -11,7 +11,7 @@ docs/rpf.md ("The one 1000-run cell where `tl-rpf` trails `tl-ukf`"):
 Every filter (and the sources the TL ones listen to) steps once, in one batch of the runs, through
 the step driver; a collector keeps the estimates and the sources' transfers.
 
-    .venv/bin/python benchmarks/turn_bias.py [--runs 100] [--truth-seed 4]
+    .venv/bin/python papers/rpf/turn_bias.py [--runs 100] [--truth-seed 4]
 """
 
 from __future__ import annotations
