@@ -5,7 +5,7 @@ else, and the untouched original goes to ``<name>.full.json`` beside it, which g
 
     .venv/bin/python papers/strip_runs.py papers/rpf/results/presets [FILE_OR_DIR ...]
 
-The committed files' arrays are in the history: ``git show 690846e:docs/results/long/...``
+The committed files' arrays are in the history: ``git show 68d1365:papers/<study>/results/...``
 (papers/README.md, "Per-run arrays").
 """
 
