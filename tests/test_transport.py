@@ -19,6 +19,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import zenoh
@@ -309,6 +310,14 @@ def client(endpoint: str, **kw: object) -> zenoh.Session:
     return open_session(ZenohSettings(endpoints=[endpoint], **kw))  # type: ignore[arg-type]
 
 
+def put_once_subscribed(session: zenoh.Session, key: str, payload: bytes) -> None:
+    """Put ``payload`` on ``key`` once a subscriber's route has reached ``session`` (a put before
+    that goes nowhere), waiting for that rather than for a fixed time."""
+    with Publisher(session, key) as pub:
+        assert pub.wait_for_subscribers(10), f"no subscriber for {key} reached the publisher"
+        pub.put(payload)
+
+
 # ---- integration ------------------------------------------------------------------------------
 
 
@@ -395,9 +404,8 @@ def test_one_inbox_for_several_keys(router: str) -> None:
         client(router) as b,
         Subscriber(b, [keys.EPISODES, keys.PRIMARY_MEAS]) as sub,
     ):
-        time.sleep(0.2)
-        a.put(keys.episode("multi"), b"1")
-        a.put(keys.primary_meas("multi"), b"2")
+        put_once_subscribed(a, keys.episode("multi"), b"1")
+        put_once_subscribed(a, keys.primary_meas("multi"), b"2")
         got = {sub.recv(10).key, sub.recv(10).key}  # type: ignore[union-attr]
         assert got == {keys.episode("multi"), keys.primary_meas("multi")}
 
@@ -457,10 +465,15 @@ def test_queryable_failure_becomes_an_error_reply(router: str) -> None:
         raise RuntimeError("boom")
 
     with client(router) as a, client(router) as b, Queryable(a, "tltrack/test/broken", broken):
-        time.sleep(0.2)
-        t = time.monotonic()
-        errors = [r.err for r in b.get("tltrack/test/broken", timeout=5) if r.err is not None]
+        # ask until the queryable's route has reached b (a get before that has no answer)
+        errors: list[Any] = []
+        deadline = time.monotonic() + 10
+        while not errors and time.monotonic() < deadline:
+            t = time.monotonic()
+            errors = [r.err for r in b.get("tltrack/test/broken", timeout=5) if r.err is not None]
         assert errors and b"boom" in errors[0].payload.to_bytes()
+        assert time.monotonic() - t < 3  # the failed query was finalized, not timed out
+        t = time.monotonic()
         assert query(b, "tltrack/test/broken", timeout=5) == []
         assert time.monotonic() - t < 3  # the failed query was finalized, not timed out
 
@@ -507,7 +520,8 @@ def test_liveliness_history_and_undeclare(router: str) -> None:
     key = keys.alive("primary", "primary_tracker")
     with client(router) as a, client(router) as b:
         token = declare_token(a, key)
-        time.sleep(0.3)
+        with LivelinessWatcher(b, key) as first:  # the token has reached the router
+            assert first.wait_until(key, alive=True, timeout=10)
         # declared before the watcher: reported through history
         with LivelinessWatcher(b, keys.alive("primary", "*")) as watcher:
             assert watcher.wait_until(key, alive=True, timeout=10)
@@ -536,8 +550,7 @@ def test_user_password_authentication(tmp_path: Path) -> None:
             client(endpoint, username="primary", password="pw-primary") as b,
             Subscriber(b, "tltrack/test/auth") as sub,
         ):
-            time.sleep(0.2)
-            a.put("tltrack/test/auth", b"ok")
+            put_once_subscribed(a, "tltrack/test/auth", b"ok")
             r = sub.recv(10)
             assert r is not None and r.payload == b"ok"
         with pytest.raises(zenoh.ZError):
@@ -581,11 +594,13 @@ def test_acl_by_operator_prefix(tmp_path: Path) -> None:
             client(endpoint, username="source", password="pw2") as src,
             client(endpoint, username="primary", password="pw1") as prim,
             Subscriber(prim, "tltrack/source/**") as sub,
+            Publisher(src, keys.transfer("s1", "e1")) as transfer,
         ):
-            time.sleep(0.3)
+            # the primary's subscription has reached the source (the transfer may go to it)
+            assert transfer.wait_for_subscribers(10)
             src.put(keys.source_meas("s1", "e1"), b"raw")
             src.put(keys.source_estimate("s1", "e1"), b"estimate")
-            src.put(keys.transfer("s1", "e1"), b"transfer")
+            transfer.put(b"transfer")
             r = sub.recv(10)
             assert r is not None and r.key == keys.transfer("s1", "e1")
             assert sub.recv(1.0) is None
@@ -618,8 +633,7 @@ def test_mutual_tls(tmp_path: Path) -> None:
             client(endpoint, **tls) as b,
             Subscriber(b, "tltrack/test/tls") as sub,
         ):
-            time.sleep(0.2)
-            a.put("tltrack/test/tls", b"secret")
+            put_once_subscribed(a, "tltrack/test/tls", b"secret")
             r = sub.recv(10)
             assert r is not None and r.payload == b"secret"
         # without a client certificate the router refuses the link
@@ -647,8 +661,7 @@ def test_decode_of_a_received_sample_is_the_only_entry(router: str) -> None:
         P_eta=[[2.0, 0.1], [0.1, 1.0]],
     )
     with client(router) as a, client(router) as b, Subscriber(b, key) as sub:
-        time.sleep(0.2)
-        a.put(key, encode(msg))
+        put_once_subscribed(a, key, encode(msg))
         r = sub.recv(10)
         assert r is not None and decode(r.payload, Transfer) == msg
         assert keys.source_of(r.key) == "s1" and keys.episode_of(r.key) == "dec"
@@ -663,7 +676,6 @@ def test_background_router_in_a_thread() -> None:
         client(endpoint) as b,
         Subscriber(b, "tltrack/test/bg") as sub,
     ):
-        time.sleep(0.2)
-        a.put("tltrack/test/bg", b"x")
+        put_once_subscribed(a, "tltrack/test/bg", b"x")
         r = sub.recv(10)
         assert r is not None and r.payload == b"x"
