@@ -47,9 +47,7 @@ def rewrite(text: str, source: Path, srcdir: Path, papers: Path) -> str:
     return LINK.sub(one, text)
 
 
-def on_include_read(
-    app: Any, relative_path: Path, parent_docname: str, content: list[str]
-) -> None:
+def on_include_read(app: Any, relative_path: Path, parent_docname: str, content: list[str]) -> None:
     srcdir = Path(app.srcdir).resolve()
     papers = (srcdir.parent / "papers").resolve()
     source = (srcdir / relative_path).resolve()
