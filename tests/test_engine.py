@@ -2,7 +2,7 @@ import json
 
 import numpy as np
 import pytest
-from tltrack.config import make_config
+from tltrack.config import load_config, make_config
 from tltrack.engine import results
 from tltrack.engine.montecarlo import nees, run_experiment, run_sweep, trace_run
 from tltrack.engine.scenario import simulate, truth
@@ -146,3 +146,22 @@ def test_nees_of_a_collapsed_cloud_is_that_of_its_spread_not_rounding_noise():
     broken[1, 0, 0] = np.nan
     got, _ = nees(d, broken)
     assert np.isnan(got[1]) and np.array_equal(got[[0, 2]], solved[[0, 2]])
+
+
+def test_the_nis_of_a_fitting_model_is_chi2_and_a_too_quiet_one_is_told(tmp_path) -> None:
+    """A linear-Gaussian cell (CV, position fixes): the UKF's mean NIS is n_z = 2 and its window
+    mean stays in its band. A target circling at 50 m/s, tracked as nearly straight (q1 = 1e-4),
+    surprises the filter at almost every step, and the result says so, with no truth needed."""
+    fixes = {"primary_sensor": {"kind": "position", "sigma_pos": 5.0}, "seed": 4}
+    cfg = make_config(scenario="cv", runs=40, K=60, truth="random", **fixes)
+    fits = run_experiment(cfg, ["ukf"], workers=1, time_steps=False)["ukf"]
+    assert abs(fits.nis - 2.0) < 0.15, fits.nis
+    assert fits.nis_above_band < 0.05 and fits.consistency is None
+    t = np.arange(0.0, 121.0)
+    xy = 3000.0 + 500.0 * np.stack([np.cos(0.1 * t), np.sin(0.1 * t)], 1)
+    track = tmp_path / "circle.csv"
+    track.write_text("t,x,y\n" + "".join(f"{a},{x},{y}\n" for a, (x, y) in zip(t, xy, strict=True)))
+    quiet = load_config(None, scenario="cv", q1=1e-4, runs=10, truth_file=track, **fixes)
+    off = run_experiment(quiet, ["ukf"], workers=1, time_steps=False)["ukf"]
+    assert off.nis_above_band > 0.5 and off.consistency is not None, off.nis_above_band
+    assert "noise is too low" in off.consistency

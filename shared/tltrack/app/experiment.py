@@ -125,9 +125,11 @@ def _print_table(doc: dict[str, Any]) -> None:
 
     t = Table(
         title="position RMSE (paper's overall definition)",
-        caption="NEES*: the covariance was singular (a collapsed cloud) on some run-steps",
+        caption="NEES*: the covariance was singular (a collapsed cloud) on some run-steps; "
+        "NIS: of the filter's own measurement (n_z when its model fits), and the share of "
+        "20-step windows above its 99% band",
     )
-    for col in ("filter", "RMSE [m]", "lost", "NEES", "ms/step"):
+    for col in ("filter", "RMSE [m]", "lost", "NEES", "NIS", "above", "ms/step"):
         t.add_column(col, justify="right" if col != "filter" else "left")
     for name, r in doc["filters"].items():
         ms = r["ms_per_step"]
@@ -136,9 +138,14 @@ def _print_table(doc: dict[str, Any]) -> None:
             f"{r['rmse_overall']:.2f}",
             f"{r['lost_fraction']:.1%}",
             f"{r['nees']:.4g}{'*' if r['nees_singular_rate'] > 0 else ''}",
+            f"{r['nis']:.3g}",
+            f"{r['nis_above_band']:.0%}",
             "-" if ms is None else f"{ms:.3f}",
         )
     Console().print(t)
+    for name, r in doc["filters"].items():
+        if r["consistency"]:
+            console.print(f"[yellow]warning:[/yellow] {name}: {r['consistency']}")
 
 
 @app.command()

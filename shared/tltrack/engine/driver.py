@@ -56,6 +56,8 @@ class StepRecord:
     seconds: float
     used: NDArray[np.bool_] | None = None  #: a primary's runs whose update used a transfer
     transfer: Observation | None = None  #: a source's (eta_hat, P_eta_eta) for k + 1
+    #: per run, the NIS of the filter's own z_k before its update (None: no z_k)
+    nis: Array | None = None
 
 
 class Collector(Protocol):
@@ -216,7 +218,7 @@ class Sources:
             name_ = self.names[name, sid]
             _tell(
                 self.collectors,
-                StepRecord(k, name_, "source", role.filter, est, dt, transfer=transfer),
+                StepRecord(k, name_, "source", role.filter, est, dt, None, transfer, role.nis),
             )
         return out
 
@@ -291,7 +293,8 @@ class Primaries:
                 est = role.step(z, feed(spec))
             dt = time.perf_counter() - t0
             used = None if name in self._twin_of else role.used
-            _tell(self.collectors, StepRecord(k, name, spec.role, role.filter, est, dt, used))
+            record = StepRecord(k, name, spec.role, role.filter, est, dt, used, None, role.nis)
+            _tell(self.collectors, record)
             out[name] = est
         return out
 

@@ -26,7 +26,8 @@ from tltrack.engine.driver import Direct, Driver, StepRecord, primary_specs, sou
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import simulate
-from tltrack.engine.setup import Setup
+from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.filters import consistency
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import position_fix
 from tltrack.filters.kernels.moments import spread_coordinates
@@ -50,6 +51,12 @@ class FilterStats:
     transfer_steps: int = 0  # run-steps whose update used at least one transfer
     regularised: int = 0  # run-steps whose cloud an rpf redrew from its kernel
     tracks: list[Array] = field(default_factory=list)  # per batch, (K, B, n) means, on request
+    n_z: int = 0  # components of the filter's own measurement (the NIS band's degrees of freedom)
+    nis_sum: float = 0.0  # over run-steps with a finite NIS of the own measurement
+    nis_count: int = 0
+    windows: int = 0  # run-steps with a full window of NIS (consistency.WINDOW)
+    above_band: int = 0  # ... whose window mean was above its 99% band
+    below_band: int = 0  # ... below it
 
     def __post_init__(self) -> None:
         self.sq_err = np.zeros(self.K)
@@ -65,6 +72,12 @@ class FilterStats:
         self.transfer_steps += other.transfer_steps
         self.regularised += other.regularised
         self.tracks += other.tracks
+        self.n_z = self.n_z or other.n_z
+        self.nis_sum += other.nis_sum
+        self.nis_count += other.nis_count
+        self.windows += other.windows
+        self.above_band += other.above_band
+        self.below_band += other.below_band
 
 
 def expand(names: Sequence[str], cfg: Config) -> list[FilterSpec]:
@@ -99,13 +112,27 @@ def nees(d: Array, P: Array, rcond: float = 1e-10) -> tuple[Array, NDArray[np.bo
 
 
 class _Score:
-    """Accumulates one filter's errors against the truth of a batch."""
+    """Accumulates one filter's errors against the truth of a batch, and its consistency."""
 
-    def __init__(self, K: int, layout: Layout, keep_tracks: bool) -> None:
-        self.stats = FilterStats(K)
+    def __init__(self, K: int, layout: Layout, keep_tracks: bool, n_z: int) -> None:
+        self.stats = FilterStats(K, n_z=n_z)
         self.pos = layout.pos
         self._sq: list[Array] = []
         self._means: list[Array] | None = [] if keep_tracks else None
+        self._window = consistency.Window()
+
+    def add_nis(self, values: Array) -> None:
+        """One step's NIS of the filter's own z_k, per run."""
+        s = self.stats
+        finite = np.isfinite(values)
+        s.nis_sum += float(values[finite].sum())
+        s.nis_count += int(finite.sum())
+        mean = self._window.push(values)
+        full = np.isfinite(mean)
+        lo, hi = consistency.band(s.n_z)
+        s.windows += int(full.sum())
+        s.above_band += int((mean[full] > hi).sum())
+        s.below_band += int((mean[full] < lo).sum())
 
     def add(self, k: int, est: Estimate, truth_k: Array) -> None:
         d = est.mean - truth_k  # (B, n)
@@ -131,9 +158,18 @@ class Scores:
     """A collector (:mod:`~tltrack.engine.driver`): every filter's errors against the truth
     (K + 1, B, n_x) of a batch, and with ``timing`` its wall time per step."""
 
-    def __init__(self, truth: Array, layout: Layout, timing: bool, keep_tracks: bool) -> None:
+    def __init__(
+        self,
+        truth: Array,
+        layout: Layout,
+        timing: bool,
+        keep_tracks: bool,
+        n_z: Callable[[str], int] = lambda _name: 0,
+    ) -> None:
+        """``n_z(name)``: the components of filter ``name``'s own measurement (0: no NIS)."""
         self.truth, self.layout = truth, layout
         self.timing, self.keep_tracks = timing, keep_tracks
+        self.n_z = n_z
         self._scores: dict[str, _Score] = {}
         self._filters: dict[str, Filter] = {}
 
@@ -141,12 +177,13 @@ class Scores:
         r = record
         score = self._scores.get(r.name)
         if score is None:
-            score = self._scores[r.name] = _Score(
-                len(self.truth) - 1, self.layout, self.keep_tracks
-            )
+            K, n_z = len(self.truth) - 1, self.n_z(r.name)
+            score = self._scores[r.name] = _Score(K, self.layout, self.keep_tracks, n_z)
         if self.timing:
             score.stats.step_ms.append(r.seconds * 1e3)
         score.add(r.k, r.estimate, self.truth[r.k])
+        if r.nis is not None and score.stats.n_z:
+            score.add_nis(r.nis)
         if r.used is not None:
             score.stats.transfer_steps += int(r.used.sum())
         self._filters[r.name] = r.filter
@@ -218,7 +255,7 @@ def run_sweep_batch(
     truth = np.stack([s.truth for s in sims[0]], axis=1)  # (K + 1, B, n)
     # sensor id -> (K, n_z, B), per configuration (the sources' are the same in all)
     z = [{i: np.stack([s.z[i] for s in sim], axis=2) for i in base.sensor_ids} for sim in sims]
-    scores = [Scores(truth, base.layout, timing, keep_tracks) for _ in setups]
+    scores = [Scores(truth, s.layout, timing, keep_tracks, own_n_z(s)) for s in setups]
     lag = {sid: transfer_lag(base.cfg, sid) for sid in base.source_ids}
     driver = Driver(
         setups, names, x0_hat, runs, channel=Direct(lag), collectors=[[s] for s in scores]
@@ -232,6 +269,18 @@ def run_sweep_batch(
             ],
         )
     return [s.close() for s in scores]
+
+
+def own_n_z(setup: Setup) -> Callable[[str], int]:
+    """The components of the own measurement of a filter, by its reported name."""
+
+    def n_z(name: str) -> int:
+        if not name.startswith("source-"):
+            return setup.sensor(PRIMARY).n_z
+        sid = name.split("/", 1)[1] if "/" in name else setup.source_ids[0]
+        return setup.sensor(sid).n_z
+
+    return n_z
 
 
 def _regularised(filt: Filter) -> int:
@@ -262,11 +311,17 @@ class FilterResult:
     transfer_rate: float  # share of run-steps whose update used a transfer
     regularised_rate: float  # share of run-steps an rpf regularised (rpf_bandwidth > 0)
     run_rmse: list[float]  # per run, sqrt(mean over k of its squared error): paired MC errors
+    nis: float  # mean NIS of the filter's own measurement (n_z when its model fits)
+    nis_above_band: float  # share of full windows whose mean NIS was above its 99% band
+    nis_below_band: float  # ... below it
+    consistency: str | None  # what the NIS says when it stands out (consistency.verdict)
 
     @classmethod
     def from_stats(cls, s: FilterStats, runs: int, lost_threshold: float) -> FilterResult:
         rmse_k = np.sqrt(s.sq_err / runs)
         final = np.concatenate(s.final_err)
+        above = s.above_band / s.windows if s.windows else 0.0
+        below = s.below_band / s.windows if s.windows else 0.0
         return cls(
             rmse_per_step=rmse_k.tolist(),
             rmse_overall=float(rmse_k.mean()),
@@ -277,6 +332,10 @@ class FilterResult:
             transfer_rate=s.transfer_steps / (runs * s.K),
             regularised_rate=s.regularised / (runs * s.K),
             run_rmse=np.sqrt(np.concatenate(s.run_mse)).tolist(),
+            nis=s.nis_sum / s.nis_count if s.nis_count else float("nan"),
+            nis_above_band=above,
+            nis_below_band=below,
+            consistency=consistency.verdict(above, below),
         )
 
 

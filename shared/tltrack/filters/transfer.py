@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.filters.base import Array, Estimate, Filter
+from tltrack.filters.consistency import nis
 from tltrack.filters.decision import TransferPolicy
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
@@ -41,20 +42,23 @@ class Source:
         self.R = R
         self.recover = recover
         self.recovered: NDArray[np.bool_] | None = None  #: per run, by the last step
-        self._predicted = False
+        self.nis: Array | None = None  #: per run, of the last step's z_k (None: no z_k)
+        self._upcoming: Observation | None = None  #: the last transfer: its z_k's prediction
 
     def step(self, z: Observation | None) -> tuple[Estimate, Observation]:
-        if not self._predicted:
+        if self._upcoming is None:
             self.filter.predict()
+            self._upcoming = self.filter.predicted_observation(self.sensor, self.R)
         self.recovered = None
+        self.nis = None if z is None else nis(z, self._upcoming)
         if z is not None:
             if self.recover is not None:
                 self.recovered = self.recover(self.filter, z)
             self.filter.update([z])
         est = self.filter.estimate()
         self.filter.predict()
-        self._predicted = True
-        return est, self.filter.predicted_observation(self.sensor, self.R)
+        self._upcoming = self.filter.predicted_observation(self.sensor, self.R)
+        return est, self._upcoming
 
 
 class Primary:
@@ -82,12 +86,14 @@ class Primary:
         self.used: NDArray[np.bool_] | None = None
         self.rolled_back: NDArray[np.bool_] | None = None  #: per run, by the last step
         self.recovered: NDArray[np.bool_] | None = None  #: per run, by the last step
+        self.nis: Array | None = None  #: per run, of the last step's own z_k (None: no z_k)
         self.twin_estimate: Estimate | None = None
 
     def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
         if self.twin is not None:
             self.twin_estimate = self.twin.step(z)
         self.filter.predict()
+        self.nis = None if z is None else nis(z, self.filter.predicted_observation(z.sensor, z.cov))
         self.recovered = None
         if self.recover is not None and z is not None:
             self.recovered = self.recover(self.filter, z)
