@@ -61,6 +61,16 @@ def logs(s: supervisor.Stack) -> str:
     return "\n".join(f"--- {p.name}\n{p.read_text()[-3000:]}" for p in s.logs.glob("*.log"))
 
 
+def connecting(pid: int) -> bool:
+    """Whether zenoh's runtime has started in process ``pid`` (its thread net-0): a service is
+    then inside zenoh.open, waiting for its router."""
+    names = set()
+    for comm in Path(f"/proc/{pid}/task").glob("*/comm"):
+        with contextlib.suppress(OSError):
+            names.add(comm.read_text().strip())
+    return "net-0" in names
+
+
 def wait_until(pred: Any, timeout: float, every: float = 0.2) -> bool:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

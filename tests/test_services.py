@@ -3,12 +3,11 @@
 import contextlib
 import shutil
 import sqlite3
-import time
 
 import msgpack
 import numpy as np
 import pytest
-from livestack import estimates, logs, sim_flags, stack, start_all, wait_until
+from livestack import connecting, estimates, logs, sim_flags, stack, start_all, wait_until
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.live import latency, supervisor
@@ -86,7 +85,9 @@ def test_services_start_in_any_order_router_last(tmp_path):
         s.start_service("source_tracker")
         s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         s.start_service("primary_tracker")
-        time.sleep(2.0)
+        # every service is up to its zenoh.open, waiting for the router, before it starts
+        waiting = lambda: all(connecting(p.pid) for p in s.procs.values())  # noqa: E731
+        assert wait_until(waiting, 60), logs(s)
         s.start_router()
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
@@ -157,18 +158,16 @@ def test_malformed_payloads_are_rejected_counted_and_survived(tmp_path):
             for key in subscribed:
                 for payload in GARBAGE:
                     session.put(key, payload)
-            time.sleep(1.0)
+
+            def rejected() -> int:
+                summary = supervisor.fetch_summary(s.endpoint) or {}
+                return int(summary.get("messages", {}).get("rejected_total", 0))
+
+            # the session stays open until the services have counted the garbage (closing it
+            # at once could drop what is still queued)
+            assert wait_until(lambda: rejected() >= 3 * len(GARBAGE), 60), logs(s)
         s.start_service("sensor_sim", *sim_flags(15, 300, pace=0))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
-        assert wait_until(
-            lambda: (
-                (supervisor.fetch_summary(s.endpoint) or {})
-                .get("messages", {})
-                .get("rejected_total", 0)
-                >= 3 * len(GARBAGE)
-            ),
-            30,
-        )
         summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None
         for svc in ("primary/primary_tracker", "source/s1/source_tracker", "referee/scorer"):
