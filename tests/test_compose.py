@@ -699,7 +699,15 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
     # 2. cut the source tracker off the network, for a few lease times
     t_cut = time.time()
     _run(["docker", "network", "disconnect", stack.network, source])
-    time.sleep(LEASE_S + 6.0)
+
+    # ... until the primary has stepped a while without it, its token gone (a lease and a step)
+    def isolated_a_while() -> bool:
+        tl = stack.steps(PART_EPISODE, "tl-rpf")
+        return sum(ts > t_cut + LEASE_S + 1.0 for _, ts, _ in tl.values()) >= 5 * PART_PACE
+
+    assert wait_until(isolated_a_while, 120, every=0.5), "the primary stalled\n" + condensed(
+        stack.logs("primary_tracker", "source_tracker")
+    )
     t_heal = time.time()
     _run(["docker", "network", "connect", "--alias", "source_tracker", stack.network, source])
 
