@@ -479,7 +479,7 @@ def test_compose_profile_mc_runs_reproduce_with_the_local_pools_results(mc_clust
         nets = _run(["docker", "inspect", "-f", "{{json .NetworkSettings.Networks}}", cid]).stdout
         assert list(json.loads(nets)) == [f"{mc_cluster.project}_mc"], nets
 
-    runs = 4
+    runs = 2  # the batches of four jobs (one per N) on two workers
     script = (
         f"tltrack reproduce --runs {runs} --table2-pf-only --out /data/r >&2 && python -c "
         "\"import json, glob; print(json.dumps({p.split('/')[-2]: json.load(open(p))['filters'] "
