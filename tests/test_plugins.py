@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from doubles import Offline, episode_start, received
 from livestack import estimates
-from tltrack.config import Config, SensorSpec, SourceSpec, load_config
+from tltrack.config import Config, ModeSpec, SensorSpec, SourceSpec, load_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.filters.kinds import FILTERS
 from tltrack.models.kinds import MOTIONS, SENSORS
@@ -114,7 +114,7 @@ def _numeric(annotation: object) -> bool:
 def test_every_numeric_config_field_and_every_declared_parameter_has_a_unit() -> None:
     missing = [
         f"{model.__name__}.{name}"
-        for model in (Config, SourceSpec, SensorSpec)
+        for model in (Config, SourceSpec, SensorSpec, ModeSpec)
         for name, field in model.model_fields.items()
         if _numeric(field.annotation)
         and not (isinstance(field.json_schema_extra, dict) and field.json_schema_extra.get("unit"))

@@ -143,6 +143,34 @@ class SensorSpec(BaseModel):
         return hash((self.kind, self.position, tuple(sorted(self.params.items()))))
 
 
+class ModeSpec(BaseModel):
+    """One motion mode of the filters (``motion_modes``), in the coordinated turn's state:
+    ``cv`` holds the turn rate at 0, ``ct`` turns with turn-rate noise q2."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    kind: Literal["cv", "ct"]
+    q1: float = Field(
+        ge=0,
+        allow_inf_nan=False,
+        description="acceleration noise",
+        json_schema_extra=unit("m^2/s^4"),
+    )
+    q2: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="turn-rate noise (ct only)",
+        json_schema_extra=unit("rad^2/s^3"),
+    )
+
+    @model_validator(mode="after")
+    def _no_turn_noise_when_straight(self) -> ModeSpec:
+        if self.kind == "cv" and self.q2 != 0.0:
+            raise ValueError("a cv mode holds the turn rate at 0: it has no q2")
+        return self
+
+
 class SourceSpec(BaseModel):
     """One source operator: its id, sensor, filter kind, and (for robustness studies) a fault.
 
@@ -293,6 +321,17 @@ class Config(BaseModel):
         description="robust TL: at most this share of steps with a transfer",
         json_schema_extra=unit("1"),
     )
+    motion_modes: list[ModeSpec] | None = Field(
+        None,
+        min_length=1,
+        description="the filters' motion modes (the truth keeps the scenario's model); "
+        "none: the scenario's single model",
+    )
+    mode_transition: list[list[float]] | None = Field(
+        None,
+        description="the modes' Markov chain: row i, the probabilities of each mode after mode i",
+        json_schema_extra=unit("1"),
+    )
     filter_options: dict[str, dict[str, float]] = Field(
         default_factory=dict,
         description="per filter kind, values of the parameters it declares (e.g. "
@@ -363,7 +402,27 @@ class Config(BaseModel):
         sensor = self.primary_sensor
         if self.primary_position is not None and sensor is not None and sensor.position:
             raise ValueError("give either primary_position or primary_sensor.position, not both")
+        self._check_modes()
         return self
+
+    def _check_modes(self) -> None:
+        modes, Pi = self.motion_modes, self.mode_transition
+        if modes is None:
+            if Pi is not None:
+                raise ValueError("mode_transition needs motion_modes")
+            return
+        if self.scenario != "ct":
+            raise ValueError("motion_modes share the coordinated turn's state: use scenario ct")
+        M = len(modes)
+        if Pi is None:
+            if M > 1:
+                raise ValueError(f"motion_modes: give mode_transition, a {M}x{M} matrix")
+            return
+        ok = len(Pi) == M and all(len(r) == M for r in Pi)
+        if not ok or any(not (math.isfinite(p) and p >= 0) for r in Pi for p in r):
+            raise ValueError(f"mode_transition must be {M}x{M}, of probabilities")
+        if any(abs(sum(r) - 1.0) > 1e-9 for r in Pi):
+            raise ValueError("mode_transition: each row must sum to 1")
 
     def filter_parameters(self, kind: str) -> dict[str, float]:
         """The values of every parameter filter ``kind`` declares: a top-level field of that

@@ -91,9 +91,9 @@ Through a spline of reports a minute apart, the error is the interpolation's: on
 1.5%, Omega 10% at worst and 2% RMS.
 
 Which components go where is a :class:`StateLayout` (``n``, ``pos``, ``vel``, and ``acc`` or
-``turn_rate``); :data:`STATE_LAYOUTS` holds the three scenarios' (``cv`` [x, vx, y, vy], ``ct``
-[x, vx, y, vy, Omega], ``ca`` [x, vx, ax, y, vy, ay]). This module imports no motion model: a new
-model passes its own layout.
+``turn_rate``), made from a motion model's declared components by :meth:`StateLayout.of` (``cv``
+[x, vx, y, vy], ``ct`` [x, vx, y, vy, Omega], ``ca`` [x, vx, ax, y, vy, ay]): a new model's
+layout follows from its own declaration.
 """
 
 from __future__ import annotations
@@ -539,10 +539,12 @@ def load_truth(
 
 
 def file_truth(cfg: Config) -> Array:
-    """The truth x_0..x_K (K + 1, n_x) of a config whose truth is a file (see :func:`configure`).
+    """The truth x_0..x_K (K + 1, n_x) of a config whose truth is a file (see
+    :func:`tltrack.config.load.complete_from_truth_file`).
 
-    Refuses a config whose x0 is not the track's first state: it was not built by
-    :func:`configure`, and its filters would start somewhere else.
+    Refuses a config whose x0 is not the track's first state: it was not completed by
+    :func:`~tltrack.config.load.complete_from_truth_file`, and its filters would start somewhere
+    else.
     """
     x = track_states(cfg, recorded_track(cfg))
     if len(x) < cfg.K + 1:

@@ -28,6 +28,7 @@ from tltrack.declare import UnknownKindError
 from tltrack.engine.setup import Setup
 from tltrack.engine.streams import streams
 from tltrack.filters.base import Filter
+from tltrack.filters.imm import GaussianFilter, InteractingMultipleModel
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.recovery import Recovery
 
@@ -104,15 +105,29 @@ def build(
     runs: Sequence[int],
     source_id: str | None = None,
 ) -> Filter:
-    """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0)."""
+    """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0).
+
+    With motion modes (config ``motion_modes``), a particle kind carries a mode per particle,
+    and any other kind runs one filter per mode inside an interacting multiple-model filter.
+    """
     cfg = setup.cfg
     cls = FILTERS.get(spec.kind)
     rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id)) if cls.particle else None
-    return cls.build(
-        setup.motion,
-        x0_hat,
-        setup.P0,
-        particles=cfg.particles,
-        rngs=rngs,
-        params=cfg.filter_parameters(spec.kind),
-    )
+    params = cfg.filter_parameters(spec.kind)
+    P0, N = setup.P0, cfg.particles
+    modes = setup.modes
+    if modes is None:
+        return cls.build(setup.motion, x0_hat, P0, particles=N, rngs=rngs, params=params)
+    if cls.particle:
+        try:
+            return cls.build(modes.models[0], x0_hat, P0, particles=N, rngs=rngs, params=params,
+                             modes=modes)  # fmt: skip
+        except TypeError:
+            raise ValueError(f"filter kind {spec.kind} takes no motion_modes") from None
+    each = [cls.build(m, x0_hat, P0, particles=N, rngs=None, params=params) for m in modes.models]
+    if not all(isinstance(f, GaussianFilter) for f in each):
+        raise ValueError(
+            f"filter kind {spec.kind} takes no motion_modes: an interacting multiple-model filter "
+            "mixes Gaussian filters (with m, P and loglik)"
+        )
+    return InteractingMultipleModel(each, modes.transition, modes.initial)

@@ -20,7 +20,9 @@ from numpy.typing import NDArray
 from tltrack.config import PRIMARY, Config, SensorSpec, position_of
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
+from tltrack.models.coordinated_turn import CoordinatedTurn
 from tltrack.models.kinds import MOTIONS, SENSORS
+from tltrack.models.modes import MotionModes, Straight
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -32,6 +34,24 @@ def motion_model(cfg: Config) -> MotionModel:
     """The scenario's motion model, with the noise parameters it declares."""
     cls = MOTIONS.get(cfg.scenario)
     return cls.build(cfg.Ts, {p.name: float(getattr(cfg, p.name)) for p in cls.parameters})
+
+
+def motion_modes(cfg: Config) -> MotionModes | None:
+    """The filters' modes, each in the coordinated turn's state, with their Markov chain; the
+    modes start equally likely."""
+    if cfg.motion_modes is None:
+        return None
+    models: list[MotionModel] = [
+        Straight(cfg.Ts, m.q1) if m.kind == "cv" else CoordinatedTurn(cfg.Ts, m.q1, m.q2)
+        for m in cfg.motion_modes
+    ]
+    kinds = [m.kind for m in cfg.motion_modes]
+    names = tuple(
+        k if kinds.count(k) == 1 else f"{k}{kinds[: i + 1].count(k)}" for i, k in enumerate(kinds)
+    )
+    M = len(models)
+    Pi = np.asarray(cfg.mode_transition if cfg.mode_transition is not None else np.eye(M))
+    return MotionModes(names, tuple(models), Pi, np.full(M, 1.0 / M))
 
 
 def sensor_spec(cfg: Config, sensor_id: str = PRIMARY) -> SensorSpec:
@@ -88,7 +108,13 @@ class Setup:
 
     @cached_property
     def motion(self) -> MotionModel:
+        """The scenario's model: the truth's, and the filters' unless they have modes."""
         return motion_model(self.cfg)
+
+    @cached_property
+    def modes(self) -> MotionModes | None:
+        """The filters' motion modes (config ``motion_modes``), or None: the scenario's model."""
+        return motion_modes(self.cfg)
 
     @property
     def layout(self) -> Layout:

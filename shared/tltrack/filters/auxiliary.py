@@ -62,7 +62,9 @@ from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import auxiliary, gaussians
 from tltrack.filters.likelihood import Likelihood
 from tltrack.filters.particle import initial_cloud
+from tltrack.filters.particle_modes import ParticleModes
 from tltrack.models.base import MeasurementModel, MotionModel
+from tltrack.models.modes import MotionModes
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -129,6 +131,7 @@ class AuxiliaryParticleFilter:
         particles: int,
         rngs: Sequence[np.random.Generator] | None,
         params: Mapping[str, float],
+        modes: MotionModes | None = None,
     ) -> AuxiliaryParticleFilter:
         assert rngs is not None, "a particle filter draws from one stream per run"
         return cls(
@@ -139,6 +142,7 @@ class AuxiliaryParticleFilter:
             rngs,
             beta=params["rpf_beta"],
             bandwidth=params["rpf_bandwidth"],
+            modes=modes,
         )
 
     def __init__(
@@ -152,13 +156,22 @@ class AuxiliaryParticleFilter:
         bandwidth: float = 0.0,
         ess_min: float = ESS_MIN,
         proposal: Proposal | None = None,
+        modes: MotionModes | None = None,
     ) -> None:
-        """Draw N particles per run from N(x0_hat[:, b], P0), equally weighted."""
+        """Draw N particles per run from N(x0_hat[:, b], P0), equally weighted.
+
+        ``modes``: a jump-Markov motion model; each particle then carries a mode, drawn from the
+        chain before the first stage, so its look-ahead point is f_m(x) of its new mode m
+        (:mod:`~tltrack.filters.particle_modes`); ``model`` is then its first mode's.
+        """
         if not 0.0 <= bandwidth < 1.0:
             raise ValueError(f"bandwidth must be in [0, 1), not {bandwidth}")
+        model = model if modes is None else modes.models[0]
         self.model, self.rngs, self.N, self.beta = model, list(rngs), n_particles, beta
         self.bandwidth, self.ess_min, self.proposal = bandwidth, ess_min, proposal
         self._kernel_rngs = [g.spawn(1)[0] for g in self.rngs] if bandwidth > 0 else []
+        self.modes = None if modes is None else ParticleModes(modes, self.rngs, n_particles)
+        self._next: NDArray[np.int64] | None = None  # each slot's mode for the pending step
         #: how many times each run was regularised
         self.regularised = np.zeros(len(self.rngs), dtype=np.int64)
         B = x0_hat.shape[1]
@@ -190,8 +203,12 @@ class AuxiliaryParticleFilter:
             self._x = self._propagated(self._identity)
             self._apply_reset(self._x)
             self._reset = {}
+            if self.modes is not None and self._next is not None:
+                self.modes.of = self._next
         for b, g in enumerate(self.rngs):
             g.random(out=self._U[b])
+        if self.modes is not None:
+            self._next = self.modes.switch(self.modes.of)
         self._pending, self._preview, self._means, self._moments = True, None, None, None
 
     def update(self, observations: Sequence[Observation]) -> None:
@@ -249,6 +266,8 @@ class AuxiliaryParticleFilter:
             mean[~ok], cov[~ok] = np.nan, np.nan
         self._x, self._moments = x, (mean, cov)
         self._pending, self._preview, self._means, self._reset = False, None, None, {}
+        if self.modes is not None and self._next is not None:
+            self.modes.of = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
 
     @property
     def anchors(self) -> Array:
@@ -263,6 +282,8 @@ class AuxiliaryParticleFilter:
         return self._means
 
     def _transition_means(self, x_prev: Array) -> Array:
+        if self.modes is not None and self._next is not None:
+            return np.ascontiguousarray(self.modes.means(x_prev, self._next))
         m = np.empty_like(x_prev)
         if self._propagate is not None and self._fast(x_prev):
             self._propagate.mean(x_prev, m)
@@ -321,7 +342,19 @@ class AuxiliaryParticleFilter:
         if self._moments is None:
             self._moments = _weighted_moments(self.x, self._weights())
         mean, cov = self._moments
-        return Estimate(mean.copy(), cov + self.model.Q)
+        p = self.mode_probabilities
+        if p is None or self.modes is None:
+            return Estimate(mean.copy(), cov + self.model.Q)
+        Qs = np.stack([m.Q for m in self.modes.modes.models])
+        return Estimate(mean.copy(), cov + np.einsum("mb,mij->bij", p, Qs))
+
+    @property
+    def mode_probabilities(self) -> Array | None:
+        """(M, B): each motion mode's weighted share of the cloud; None without modes."""
+        if self.modes is None:
+            return None
+        modes = self.modes.of if not self._pending or self._next is None else self._next
+        return self.modes.probabilities(modes, self._weights())
 
     def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
         """eta_hat and P_eta_eta: the weighted moments of h over the predicted cloud (seed eqs.
@@ -345,6 +378,8 @@ class AuxiliaryParticleFilter:
         self._x = np.array(self._x)
         self._x[:, runs] = other._x[:, runs]
         self._logw[runs] = other._logw[runs]
+        if self.modes is not None and other.modes is not None:
+            self.modes.of = np.where(runs[:, None], other.modes.of, self.modes.of)
         if self._moments is not None and other._moments is not None:
             mean, cov = (np.array(a) for a in self._moments)
             mean[runs], cov[runs] = other._moments[0][runs], other._moments[1][runs]
@@ -392,8 +427,12 @@ class AuxiliaryParticleFilter:
         return x.dtype == np.float64 and x.flags.c_contiguous
 
     def _propagated(self, anc: NDArray[np.int64], x_prev: Array | None = None) -> Array:
-        """x^i = f(x_prev^{anc_i}) + L v_i with this step's noise v (slot i: v_i)."""
+        """x^i = f(x_prev^{anc_i}) + L v_i with this step's noise v (slot i: v_i); with modes,
+        f and L of the ancestor's new mode."""
         src = self._x if x_prev is None else x_prev
+        if self.modes is not None and self._next is not None:
+            modes = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
+            return self.modes.propagate(src, anc, modes, self._U, self.gaussians)
         if self._propagate is not None and self._fast(src):
             out = np.empty_like(src)
             for b in range(self.batch):

@@ -37,7 +37,9 @@ from tltrack.filters import fastpath
 from tltrack.filters.base import Estimate
 from tltrack.filters.kernels import gaussians, moments, propagation, resample
 from tltrack.filters.likelihood import Likelihood
+from tltrack.filters.particle_modes import ParticleModes
 from tltrack.models.base import MeasurementModel, MotionModel
+from tltrack.models.modes import MotionModes
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -79,9 +81,10 @@ class ParticleFilter:
         particles: int,
         rngs: Sequence[np.random.Generator] | None,
         params: Mapping[str, float],
+        modes: MotionModes | None = None,
     ) -> ParticleFilter:
         assert rngs is not None, "a particle filter draws from one stream per run"
-        return cls(model, x0_hat, P0, particles, rngs)
+        return cls(model, x0_hat, P0, particles, rngs, modes=modes)
 
     def __init__(
         self,
@@ -90,11 +93,18 @@ class ParticleFilter:
         P0: Array,
         n_particles: int,
         rngs: Sequence[np.random.Generator],
+        modes: MotionModes | None = None,
     ) -> None:
-        """Draw N particles per run from N(x0_hat[:, b], P0); ``x0_hat`` is (n_x, B)."""
+        """Draw N particles per run from N(x0_hat[:, b], P0); ``x0_hat`` is (n_x, B).
+
+        ``modes``: a jump-Markov motion model; each particle then carries a mode
+        (:mod:`~tltrack.filters.particle_modes`), and ``model`` is its first mode's.
+        """
+        model = model if modes is None else modes.models[0]
         self.model = model
         self.rngs = list(rngs)
         self.N = n_particles
+        self.modes = None if modes is None else ParticleModes(modes, self.rngs, n_particles)
         B = x0_hat.shape[1]
         L = np.asarray(model.Q_sqrt, dtype=np.float64)
         self._L = _f64(L)
@@ -137,6 +147,8 @@ class ParticleFilter:
             out = np.empty_like(self._pre)
             propagation.gather(self._pre, self._anc, out)
             out.flags.writeable = False
+            if self.modes is not None:  # each slot takes its ancestor's mode, as its state
+                self.modes.of = np.take_along_axis(self.modes.of, self._anc[:, : self.N], axis=1)
             self._x, self._pre = out, None
         return self._x
 
@@ -155,9 +167,29 @@ class ParticleFilter:
 
         The generic path uses it, and it lets tests reproduce the fast path's numbers exactly.
         """
+        return self._gaussians(self._draw_uniforms())
+
+    def _gaussians(self, U: Array) -> Array:
         E = np.empty((self.batch, self._r, self.N))
-        gaussians.gaussians(self._draw_uniforms(), E)
+        gaussians.gaussians(U, E)
         return E.transpose(1, 0, 2)
+
+    @property
+    def mode_probabilities(self) -> Array | None:
+        """(M, B): each motion mode's share of the (resampled) cloud; None without modes."""
+        if self.modes is None:
+            return None
+        of = self.modes.of
+        if self._pre is not None:  # resampled: each slot holds its ancestor's mode
+            of = np.take_along_axis(of, self._anc[:, : self.N], axis=1)
+        return self.modes.probabilities(of)
+
+    def _process_noise(self) -> Array:
+        """Q_v, or with modes the mixture sum_m P(m) Q_m of each run (B, n, n)."""
+        p = self.mode_probabilities
+        if p is None or self.modes is None:
+            return np.asarray(self.model.Q)
+        return np.einsum("mb,mij->bij", p, np.stack([m.Q for m in self.modes.modes.models]))
 
     def predict(self) -> None:
         """x_k^(i) ~ p(x_k | x_{k-1}^(i)) (seed eq. BTL_tr_particle_2), noise through Q_sqrt."""
@@ -166,6 +198,12 @@ class ParticleFilter:
         else:  # not resampled yet (the first step): every particle is its own ancestor
             src, anc = self._x, self._anc
             anc[:] = np.arange(self.N + 1)
+        if self.modes is not None:
+            modes = self.modes.switch(np.take_along_axis(self.modes.of, anc[:, : self.N], axis=1))
+            U = self._draw_uniforms()  # each run's, as the single-model filter draws them
+            self.x = self.modes.propagate(src, anc, modes, U, lambda: self._gaussians(U))
+            self.modes.of = modes
+            return
         if self._propagate is None or src.dtype != np.float64 or not src.flags.c_contiguous:
             x = self._cloud()
             self.x = self.model.f(x) + np.tensordot(self._L, self.gaussians(), axes=1)
@@ -230,7 +268,7 @@ class ParticleFilter:
             mean = np.empty((B, n))
             cov = np.empty((B, n, n))
             moments.moments(_f64(self._cloud()), mean, cov)
-        return Estimate(mean.copy(), cov + self.model.Q)
+        return Estimate(mean.copy(), cov + self._process_noise())
 
     def reinitialise(self, b: int, particles: Array) -> None:
         """Run ``b``'s cloud becomes ``particles`` (n_x, N): a lost-track recovery, after
@@ -240,9 +278,11 @@ class ParticleFilter:
         self.x = x
 
     def adopt(self, other: ParticleFilter, runs: NDArray[np.bool_]) -> None:
-        """``other``'s cloud for ``runs`` (the robust TL's rollback to its isolated twin)."""
+        """``other``'s cloud (and modes) for ``runs`` (the robust TL's rollback to its twin)."""
         x = np.array(self.x)
-        x[:, runs, :] = other.x[:, runs, :]
+        x[:, runs, :] = other.x[:, runs, :]  # (reading x gathers the clouds and their modes)
+        if self.modes is not None and other.modes is not None:
+            self.modes.of = np.where(runs[:, None], other.modes.of, self.modes.of)
         self.x = x
 
     def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:

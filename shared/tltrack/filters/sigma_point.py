@@ -161,7 +161,11 @@ class SigmaPointFilter:
         self.rule = rule
         self.m: Array = np.array(x0_hat, dtype=float)
         self.P: Array = np.broadcast_to(np.asarray(P0, dtype=float), (B, n, n)).copy()
+        #: per run, how many covariances had an eigenvalue clipped (the module's docstring)
         self.repairs = np.zeros(B, dtype=np.int64)
+        #: per run, log N(nu; 0, S) of the last update's stacked innovation (0: no statement);
+        #: an interacting multiple-model filter weighs its modes by it
+        self.loglik = np.zeros(B)
 
     def _points(self, runs: NDArray[np.intp]) -> tuple[Array, Array]:
         """Sigma points X (n, b, S) of the selected runs' (m, P), and their deviations X - m."""
@@ -190,9 +194,10 @@ class SigmaPointFilter:
         Runs are grouped by which observations apply to them, so a masked-out observation is
         absent from that run's update, exactly.
         """
+        B = self.m.shape[1]
+        self.loglik = np.zeros(B)
         if not observations:
             return
-        B = self.m.shape[1]
         active = np.array([np.ones(B, bool) if o.mask is None else o.mask for o in observations])
         patterns, group = np.unique(active.T, axis=0, return_inverse=True)
         group = group.ravel()
@@ -215,6 +220,9 @@ class SigmaPointFilter:
         Pzz = _wcov(dZ, dZ, w) + _block_diag([obs.cov[runs] for obs in used])
         Pxz = _wcov(dX, dZ, w)
         K = np.linalg.solve(Pzz, Pxz.swapaxes(-1, -2)).swapaxes(-1, -2)
+        _, logdet = np.linalg.slogdet(Pzz)
+        d2 = np.einsum("ib,bi->b", nu, np.linalg.solve(Pzz, nu.T[:, :, None])[:, :, 0])
+        self.loglik[runs] = -0.5 * (d2 + logdet + nu.shape[0] * np.log(2.0 * np.pi))
         self.m[:, runs] += np.einsum("bij,jb->ib", K, nu)
         self._set_cov(runs, self.P[runs] - K @ Pzz @ K.swapaxes(-1, -2))
 

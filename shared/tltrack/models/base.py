@@ -64,6 +64,9 @@ class MotionModel(Protocol):
     def F(self, x: Array) -> Array:
         """The Jacobian of f at a single state (for the PCRLB)."""
 
+    def with_period(self, dt: float) -> MotionModel:
+        """The same model over a step of ``dt`` seconds (reports at irregular times)."""
+
 
 @runtime_checkable
 class MeasurementModel(Protocol):

@@ -12,6 +12,7 @@ that sensors and scoring find the position at (0, 3) proves they read it through
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -77,6 +78,10 @@ class ConstantAcceleration:
     @classmethod
     def build(cls, T: float, params: dict[str, float]) -> ConstantAcceleration:
         return cls(T=T, q=params["q1"])
+
+    def with_period(self, dt: float) -> ConstantAcceleration:
+        """The same model over a step of ``dt`` seconds: F(dt) and Q(dt)."""
+        return dataclasses.replace(self, T=dt)
 
     def f(self, x: Array) -> Array:
         return np.tensordot(self.A, x, axes=1)

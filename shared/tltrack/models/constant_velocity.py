@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -52,6 +53,10 @@ class ConstantVelocity:
     @classmethod
     def build(cls, T: float, params: dict[str, float]) -> ConstantVelocity:
         return cls(T=T, q=params["q1"])
+
+    def with_period(self, dt: float) -> ConstantVelocity:
+        """The same model over a step of ``dt`` seconds: F(dt) and Q(dt)."""
+        return dataclasses.replace(self, T=dt)
 
     def f(self, x: Array) -> Array:
         return np.tensordot(self.A, x, axes=1)

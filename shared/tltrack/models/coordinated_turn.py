@@ -5,6 +5,7 @@ The turn-rate noise enters as q2 * T (the seed's Q_v); Omega -> 0 uses the strai
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -68,6 +69,10 @@ class CoordinatedTurn:
         a = np.where(small, T * (1.0 - wT * wT / 6.0), s / safe_w)
         b = np.where(small, T * (wT / 2.0), (1.0 - c) / safe_w)
         return a, b, c, s
+
+    def with_period(self, dt: float) -> CoordinatedTurn:
+        """The same model over a step of ``dt`` seconds: F(dt) and Q(dt)."""
+        return dataclasses.replace(self, T=dt)
 
     def f(self, x: Array) -> Array:
         px, vx, py, vy, w = x

@@ -1,0 +1,91 @@
+"""Multiple-model filtering: every filter kind follows a target that switches between flying
+straight and turning, and with one mode it is the single-model filter, bit for bit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tltrack.config import ConfigError, load_config, make_config
+from tltrack.engine.driver import Driver, StepRecord
+from tltrack.engine.montecarlo import run_batch
+from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
+
+pytestmark = pytest.mark.unit
+
+BASE = {"preset": "arasaratnam-haykin", "truth": "fixed", "K": 30, "particles": 300, "seed": 5}
+
+
+def test_one_mode_is_the_single_model_filter_bit_for_bit() -> None:
+    single = make_config(**BASE)
+    one = make_config(**BASE, motion_modes=[{"kind": "ct", "q1": single.q1, "q2": single.q2}])
+    names = [
+        f"{r}{k}" for k in ("pf", "rpf", "ukf", "ckf3", "ckf5") for r in ("", "tl-", "robust-tl-")
+    ]
+    names += ["fusion-rpf", "source-ckf5"]
+    a, b = run_batch(single, names, [0, 1]), run_batch(one, names, [0, 1])
+    assert a.keys() == b.keys()
+    for name in a:
+        np.testing.assert_array_equal(a[name].sq_err, b[name].sq_err, err_msg=name)
+        np.testing.assert_array_equal(a[name].nees, b[name].nees, err_msg=name)
+        assert a[name].nis_sum == b[name].nis_sum, name
+
+
+def _straight_turn_straight(path: Path) -> Path:
+    """150 m/s straight for 30 s, a 3 deg/s turn for 30 s, straight again: reports every second."""
+    heading, xy = 0.5, [(2000.0, -3000.0)]
+    for k in range(1, 91):
+        heading += np.deg2rad(3.0) if 30 <= k - 1 < 60 else 0.0
+        xy.append((xy[-1][0] + 150.0 * np.cos(heading), xy[-1][1] + 150.0 * np.sin(heading)))
+    path.write_text("t,x,y\n" + "".join(f"{t},{x},{y}\n" for t, (x, y) in enumerate(xy)))
+    return path
+
+
+def test_the_turn_mode_takes_over_within_five_steps_of_a_turn_and_lets_go_after_it(
+    tmp_path: Path,
+) -> None:
+    modes = [{"kind": "cv", "q1": 0.1}, {"kind": "ct", "q1": 0.1, "q2": 1e-3}]
+    cfg = load_config(
+        None,
+        truth_file=_straight_turn_straight(tmp_path / "turn.csv"),
+        particles=2000,
+        seed=2,
+        motion_modes=modes,
+        mode_transition=[[0.95, 0.05], [0.05, 0.95]],
+    )
+    setup, runs = Setup(cfg), [0, 1, 2, 3]
+    sims = [simulate(setup, r) for r in runs]
+    turning: dict[str, list[np.ndarray]] = {}
+
+    def collect(r: StepRecord) -> None:
+        turning.setdefault(r.name, []).append(r.filter.mode_probabilities[1].copy())  # type: ignore[attr-defined]
+
+    names = ["ukf", "pf", "rpf"]
+    x0 = np.stack([s.x0_hat for s in sims], axis=1)
+    driver = Driver([setup], names, x0, runs, collectors=[[collect]])
+    for k in range(1, cfg.K + 1):
+        z = {
+            i: setup.sensors[i].observe(np.stack([s.z[i][k - 1] for s in sims], 1))
+            for i in setup.sensor_ids
+        }
+        driver.step(k, [z])
+    for name in names:
+        p = np.array(turning[name]).mean(axis=1)  # P(ct) at k = 1..K, over the runs
+        assert p[20:30].max() < 0.5, (name, p[20:30])  # straight: the cv mode holds
+        first = 31 + int(np.argmax(p[30:] > 0.5))  # the turn starts at k = 31
+        assert first <= 36, (name, np.round(p[28:40], 2))
+        assert p[75:].max() < 0.5, (name, p[75:])  # straight again
+
+
+def test_modes_are_refused_unless_they_fit_together() -> None:
+    two = [{"kind": "cv", "q1": 1.0}, {"kind": "ct", "q1": 1.0, "q2": 1e-3}]
+    with pytest.raises(ConfigError, match="mode_transition"):
+        make_config(motion_modes=two)
+    with pytest.raises(ConfigError, match="scenario ct"):
+        make_config(scenario="cv", motion_modes=two[:1])
+    with pytest.raises(ConfigError, match="sum to 1"):
+        make_config(motion_modes=two, mode_transition=[[0.9, 0.1], [0.5, 0.6]])
+    with pytest.raises(ConfigError, match="no q2"):
+        make_config(motion_modes=[{"kind": "cv", "q1": 1.0, "q2": 1.0}])
