@@ -311,7 +311,7 @@ class Config(BaseModel):
         ge=0,
         lt=1,
         allow_inf_nan=False,
-        description="rpf: the regularisation kernel's bandwidth h (0: off; docs/rpf.md)",
+        description="rpf: the regularisation kernel's bandwidth h (0: off; papers/rpf/README.md)",
         json_schema_extra=unit("1"),
     )
     transfer_budget: float | None = Field(

@@ -1,8 +1,8 @@
 """Filter names, as the CLI and the services spell them, and how to build each one.
 
 A name is ``[role-]kind``: the kind is the posterior approximation (``pf``, the paper's bootstrap
-SIR; ``rpf``, the auxiliary particle filter that keeps the track, docs/rpf.md; ``ukf``, ``ckf3``,
-``ckf5``) and the role is how it is fed:
+SIR; ``rpf``, the auxiliary particle filter that keeps the track, papers/rpf/README.md; ``ukf``,
+``ckf3``, ``ckf5``) and the role is how it is fed:
 
 - no prefix: the isolated primary, its own measurement only;
 - ``tl-``: the primary with every source's transfer (Algorithm 2 / the stacked TL-KF update);

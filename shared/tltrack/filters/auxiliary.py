@@ -4,9 +4,9 @@ Why: the paper's bootstrap SIR proposes from the transition prior and weighs aft
 position noise is tiny (sqrt(q1) T^2/2 = 0.16 m per step) and two sharp likelihoods (z_k and the
 transfer) multiply: after resampling, a cloud whose velocity or turn rate is slightly off has no
 particle left where the next measurement points, and it never comes back (lost tracks under the
-paper's own parameters; docs/rpf.md measures it). The position at k is almost entirely decided by
-x_{k-1}, so the remedy is to choose *which* particles to propagate with the data of step k
-before propagating them.
+paper's own parameters; papers/rpf/README.md measures it). The position at k is almost entirely
+decided by x_{k-1}, so the remedy is to choose *which* particles to propagate with the data of
+step k before propagating them.
 
 One step, given the weighted cloud (x_{k-1}^i, w_{k-1}^i) and every statement of step k (z_k, the
 transfers: their product is the likelihood l_k):
@@ -28,9 +28,9 @@ Regularisation (``bandwidth`` h > 0, off by default). Position is nearly determi
 velocity and the turn rate, so resampling every step can shrink the cloud's genealogy to a few
 ancestors: the cloud then spreads over metres where the posterior spreads over tens of metres,
 and, once the target manoeuvres, it sits beside the measurements with no particle on them
-(docs/rpf.md, "Regularisation"). When the first stage's weights are degenerate (effective sample
-size below ``ess_min`` N), the cloud of x_{k-1} is first redrawn from the Liu-West shrinkage
-kernel (Liu & West 2001; the regularised PF of Musso, Oudjane & Le Gland 2001):
+(papers/rpf/README.md, "Regularisation"). When the first stage's weights are degenerate
+(effective sample size below ``ess_min`` N), the cloud of x_{k-1} is first redrawn from the
+Liu-West shrinkage kernel (Liu & West 2001; the regularised PF of Musso, Oudjane & Le Gland 2001):
 
     x_{k-1}^i  <-  a x_{k-1}^i + (1 - a) mu + h D e_i,   a = sqrt(1 - h^2),  D D^T = Sigma,
 
@@ -69,7 +69,8 @@ from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
 
-#: the look-ahead's exponent (docs/rpf.md, "tuning": chosen on seed 11, not on reported seeds)
+#: the look-ahead's exponent (papers/rpf/README.md, "tuning": chosen on seed 11, not on reported
+#: seeds)
 BETA = 0.3
 #: regularise a run when its first-stage effective sample size is below this share of N
 ESS_MIN = 0.1
@@ -114,7 +115,7 @@ class AuxiliaryParticleFilter:
         Parameter(
             "rpf_bandwidth",
             "1",
-            "rpf: the regularisation kernel's bandwidth h (0: off; docs/rpf.md)",
+            "rpf: the regularisation kernel's bandwidth h (0: off; papers/rpf/README.md)",
             default=0.0,
             ge=0,
             lt=1,

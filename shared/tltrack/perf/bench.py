@@ -17,7 +17,7 @@ What one "step" is, per name:
   ``arctan2``, resampling with ``cumsum`` + ``searchsorted``, then the mean and covariance. It is a
   yardstick, deliberately untuned;
 - ``rpf``, ``tl-rpf``, ``source-rpf``: the same steps of the auxiliary particle filter
-  (docs/rpf.md), the TL one fed by ``source-rpf``;
+  (papers/rpf/README.md), the TL one fed by ``source-rpf``;
 - ``user-model``: the ``tl-pf`` step with sensors the fast path does not know (a user's own
   range-bearing class, :class:`UserRangeBearing`): the particle filter's generic NumPy path for
   the likelihood and the predicted observation, as any new sensor gets until it has a kernel;

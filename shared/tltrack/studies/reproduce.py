@@ -21,7 +21,7 @@ from tltrack.engine.montecarlo import expand, run_sweep
 
 KF_FILTERS = ["ukf", "tl-ukf", "ckf3", "tl-ckf3", "ckf5", "tl-ckf5"]
 PF_FILTERS = ["pf", "tl-pf"]
-#: the auxiliary particle filter that keeps the track (docs/rpf.md), beside the paper's SIR
+#: the auxiliary particle filter that keeps the track (papers/rpf/README.md), beside the paper's SIR
 RPF_FILTERS = ["rpf", "tl-rpf"]
 #: what the lost-track jobs compare: both particle filters, the robust one, the UKF's share
 LOSS_FILTERS = [*PF_FILTERS, *RPF_FILTERS, "robust-tl-rpf", "ukf", "tl-ukf"]
