@@ -31,8 +31,8 @@ warm: $(STAMP)
 	$(BIN)/python -c "from tltrack.filters.warm import warm_up; warm_up()"
 
 lint: $(STAMP)
-	$(BIN)/ruff check shared services tests examples benchmarks scripts
-	$(BIN)/ruff format --check shared services tests examples benchmarks scripts
+	$(BIN)/ruff check shared services tests examples benchmarks scripts papers docs
+	$(BIN)/ruff format --check shared services tests examples benchmarks scripts papers docs
 	$(BIN)/mypy
 
 ## Benchmarks (not tests): filter step times and speedups.

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.unit
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the product's code: every module here steps the roles through the driver
-PRODUCT = ("shared/tltrack", "services", "benchmarks", "examples", "scripts")
+PRODUCT = ("shared/tltrack", "services", "benchmarks", "examples", "scripts", "papers")
 DRIVER = ROOT / "shared/tltrack/engine/driver.py"
 ROLES = ROOT / "shared/tltrack/filters/transfer.py"
 
