@@ -83,11 +83,15 @@ def test_the_cli_records_the_file_and_its_hash(tmp_path: Path) -> None:
     from tltrack.app import app
 
     out = tmp_path / "e"
-    argv = ["experiment", "--truth-file", str(SHIP), "--filters", "ukf,tl-ukf", "--runs", "2"]
+    short = tmp_path / "short.toml"  # the track's first 60 steps (all 2850 took half a minute)
+    short.write_text("K = 60\n")
+    argv = ["experiment", "--config", str(short), "--truth-file", str(SHIP)]
+    argv += ["--filters", "ukf,tl-ukf", "--runs", "2"]
     done = CliRunner().invoke(app, [*argv, "--workers", "1", "--out", str(out)])
     assert done.exit_code == 0, done.output
     doc = json.loads((out / "results.json").read_text())
     assert doc["truth"]["mode"] == "file" and doc["truth"]["file"] == SHIP.name
+    assert doc["truth"]["K"] == doc["config"]["K"] == 60
     assert len(doc["truth"]["sha256"]) == 64 and doc["config"]["truth"] == "file"
     bad = CliRunner().invoke(app, [*argv, "--truth", "fixed", "--out", str(out)])
     assert bad.exit_code == 2 and "either truth_file or truth" in bad.output
