@@ -5,12 +5,12 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 PYTEST  := $(BIN)/pytest
 
-.PHONY: demo test check lint warm bench reproduce zenohd clean
+.PHONY: demo test check lint warm bench reproduce zenohd clean docs
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev]'
+	$(BIN)/pip install --quiet -e '.[dev,docs]'
 	touch $(STAMP)
 
 ## The live dual tracker over loopback Zenoh: a router per operator and the services, one episode, the scorer's summary.
@@ -25,6 +25,11 @@ test: $(STAMP) lint warm
 ## The fast everyday subset: lint, types and the unit tier.
 check: $(STAMP) lint warm
 	$(PYTEST) -q -ra -n auto -m unit
+
+## The documentation site, into docs/_build/html (open docs/_build/html/index.html). Warnings are
+## errors: a broken link, reference or tutorial fails it (tests/test_docs.py runs it in make test).
+docs: $(STAMP) warm
+	$(BIN)/sphinx-build -b html -W --keep-going -q docs docs/_build/html -d docs/_build/doctrees
 
 ## Compile the particle-filter kernels once, so parallel test processes load them from the cache.
 warm: $(STAMP)
@@ -52,3 +57,4 @@ zenohd:
 
 clean:
 	rm -rf $(VENV) out build .pytest_cache .mypy_cache .ruff_cache
+	rm -rf docs/_build docs/tutorials/gallery docs/reference/api

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tltrack.wire.messages import EstimateMsg
 
+#: the stages of an estimate's latency, in order (the module's docstring says what each covers)
 STAGES = ("to_tracker", "wait", "step", "publish", "to_receiver")
 
 

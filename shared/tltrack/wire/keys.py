@@ -30,7 +30,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-ROOT = "tltrack"
+ROOT = "tltrack"  #: the first segment of every key
 ANY = "*"  #: matches exactly one id segment in a pattern
 ALL = f"{ROOT}/**"  #: every tltrack key
 
@@ -133,7 +133,7 @@ def stats(operator: str, service: str) -> str:
     return f"{ROOT}/{_operator(operator)}/stats/{_seg(service, 'service name')}"
 
 
-SCORER_SUMMARY = f"{ROOT}/scorer/summary"
+SCORER_SUMMARY = f"{ROOT}/scorer/summary"  #: the scorer's queryable summary
 
 # ---- subscriber patterns ----------------------------------------------------------------------
 

@@ -44,7 +44,7 @@ SUPPORTED_VERSIONS = frozenset({2})
 MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
 SYMMETRY_RTOL = 1e-9
-MAX_K = 2**31 - 1
+MAX_K = 2**31 - 1  #: the largest step index a message may carry
 
 
 def state_sizes() -> tuple[int, ...]:
