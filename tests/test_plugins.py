@@ -21,7 +21,7 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.models.kinds import MOTIONS, SENSORS
 from tltrack.services.primary_tracker import tracker as primary_svc
 from tltrack.wire import keys
-from tltrack.wire.messages import Transfer, encode
+from tltrack.wire.messages import SCHEMA_VERSION, Transfer, encode
 
 ROOT = Path(__file__).resolve().parents[1]
 RANGE_ONLY = ROOT / "examples" / "range_only"
@@ -73,7 +73,7 @@ def test_a_message_naming_an_unknown_kind_is_refused_counted_and_imports_nothing
     from tltrack.wire.messages import EpisodeStart
 
     bad = EpisodeStart.model_construct(
-        schema_version=2, type="episode_start", episode="e2", sender="sensor_sim", k=0,
+        schema_version=SCHEMA_VERSION, type="episode_start", episode="e2", sender="sensor_sim", k=0,
         t_sensor=0.0, run=0, config=start, K=5, steps_per_sec=0.0,
     )  # fmt: skip
     tracker.handle(received(keys.episode("e2"), encode(bad)))

@@ -94,6 +94,10 @@ class Ingest:
         m.step_k.labels(name).set(est.k)
         if role == "tl":
             m.transfer.labels(name, "true" if est.transfer_used else "false").inc()
+        if est.nis_window is not None:
+            m.nis.labels(name).set(est.nis_window)
+        if (share := self.state.nis_above_band(est.episode, name)) is not None:
+            m.nis_above.labels(name).set(share)
         if update is not None:
             m.on_error(update)
 

@@ -73,6 +73,20 @@ class Metrics:
             buckets=STEP_BUCKETS,
             registry=r,
         )
+        self.nis = Gauge(
+            "tltrack_nis_window",
+            "Mean NIS of the filter's own measurements over its last 20 steps (n_z when its "
+            "model fits)",
+            ["filter"],
+            registry=r,
+        )
+        self.nis_above = Gauge(
+            "tltrack_nis_above_band_ratio",
+            "Share of the episode's steps whose windowed NIS was above its 99% band (0.5 and "
+            "more: the motion model's noise is too low for the target)",
+            ["filter"],
+            registry=r,
+        )
         self.transfer = Counter(
             "tltrack_transfer_steps",
             "Steps of a transfer-learning filter, by whether a transfer was used",

@@ -20,6 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 from tltrack.engine.setup import PRIMARY, sensor_spec
+from tltrack.filters import consistency
 from tltrack.live import latency
 from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 
@@ -65,6 +66,25 @@ class Track:
     stages: dict[int, tuple[float, ...]] = field(default_factory=dict)  #: tltrack.live.latency's
     err: dict[int, float] = field(default_factory=dict)  #: position error where truth is known
     err_sum: float = 0.0
+    nis_window: float | None = None  #: the latest mean NIS over the filter's window
+    windows: int = 0  #: steps with a full window
+    above: int = 0  #: ... whose mean was above its 99% band
+    below: int = 0  #: ... below it
+
+    def record_nis(self, window: float | None, band: list[float] | None) -> None:
+        if window is None or band is None:
+            return
+        self.nis_window = window
+        self.windows += 1
+        self.above += window > band[1]
+        self.below += window < band[0]
+
+    @property
+    def consistency(self) -> str | None:
+        """What the NIS says of the filter's model (tltrack.filters.consistency.verdict)."""
+        if not self.windows:
+            return None
+        return consistency.verdict(self.above / self.windows, self.below / self.windows)
 
     def set_error(self, k: int, truth: XY) -> float:
         x, y = self.pos[k]
@@ -231,6 +251,7 @@ class State:
             tr.used[m.k] = m.transfer_used
             tr.latency_ms[m.k] = (t_recv - m.t_sensor) * 1e3
             tr.step_ms[m.k] = m.step_ms
+            tr.record_nis(m.nis_window, m.nis_band)
             if (split := latency.of(m, t_recv)) is not None:
                 tr.stages[m.k] = split
             update = None
@@ -238,6 +259,13 @@ class State:
                 update = ErrorUpdate(m.filter, m.k, tr.set_error(m.k, t), tr.rmse or 0.0)
             self.version += 1
             return "new", update
+
+    def nis_above_band(self, episode: str, name: str) -> float | None:
+        """The share of filter ``name``'s full windows above their band in ``episode``."""
+        with self._lock:
+            ep = self._episodes.get(episode)
+            tr = None if ep is None else ep.tracks.get(name)
+            return tr.above / tr.windows if tr is not None and tr.windows else None
 
     def on_liveliness(self, operator: str, service: str, alive: bool) -> None:
         with self._lock:
@@ -341,6 +369,9 @@ class State:
                     "stages_ms": latency.p50(list(tr.stages.values())),
                     "transfer_used": used,
                     "transfer_skipped": len(ks) - used,
+                    "nis_window": tr.nis_window,
+                    "nis_above_band": tr.above / tr.windows if tr.windows else None,
+                    "consistency": tr.consistency,
                 }
             )
             if tr.role == "tl" and not transfer:

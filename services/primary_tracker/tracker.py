@@ -197,6 +197,7 @@ class PrimaryTracker:
             tracker.recovered[0],
             t_step,
             tl_ms,
+            tracker.monitor.last.get(tracker.tl_name),
         ).publish(self.svc, keys.primary_estimate("tl", e))
         self._twin_later(e, ep, z)
         self.svc.count("steps")
@@ -234,6 +235,7 @@ class PrimaryTracker:
                     ep.tracker.recovered[1],
                     t_twin,
                     iso_ms,
+                    ep.tracker.monitor.last.get(ep.tracker.iso_name),
                 ).publish(self.svc, keys.primary_estimate("isolated", e))
         return None
 

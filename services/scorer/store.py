@@ -23,7 +23,8 @@ CREATE TABLE IF NOT EXISTS truth (
 CREATE TABLE IF NOT EXISTS estimates (
     episode TEXT, filter TEXT, k INTEGER, x TEXT, P TEXT, transfer_used INTEGER,
     t_sensor REAL, t_sent REAL, t_recv REAL, step_ms REAL, pos TEXT, recovered INTEGER,
-    t_received REAL, t_step REAL, PRIMARY KEY (episode, filter, k));
+    t_received REAL, t_step REAL, nis REAL, nis_window REAL, nis_band TEXT,
+    PRIMARY KEY (episode, filter, k));
 CREATE TABLE IF NOT EXISTS service_stats (
     operator TEXT, service TEXT, t REAL, stats TEXT, PRIMARY KEY (operator, service));
 """
@@ -39,6 +40,8 @@ class Store:
         added = [("truth", "pos", "TEXT"), ("estimates", "pos", "TEXT")]
         added += [("estimates", "recovered", "INTEGER")]
         added += [("estimates", "t_received", "REAL"), ("estimates", "t_step", "REAL")]
+        added += [("estimates", "nis", "REAL"), ("estimates", "nis_window", "REAL")]
+        added += [("estimates", "nis_band", "TEXT")]
         for table, column, kind in added:  # a file from before these fields
             columns = [row[1] for row in self.db.execute(f"PRAGMA table_info({table})")]
             if column not in columns:
@@ -73,8 +76,8 @@ class Store:
     def estimate(self, m: EstimateMsg, t_recv: float) -> bool:
         cur = self.db.execute(
             "INSERT OR IGNORE INTO estimates (episode, filter, k, x, P, transfer_used,"
-            " t_sensor, t_sent, t_recv, step_ms, pos, recovered, t_received, t_step)"
-            " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+            " t_sensor, t_sent, t_recv, step_ms, pos, recovered, t_received, t_step, nis,"
+            " nis_window, nis_band) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (
                 m.episode,
                 m.filter,
@@ -90,6 +93,9 @@ class Store:
                 int(m.recovered),
                 m.t_received,
                 m.t_step,
+                m.nis,
+                m.nis_window,
+                None if m.nis_band is None else json.dumps(m.nis_band),
             ),
         )
         return cur.rowcount == 1

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from tltrack.filters import consistency
 from tltrack.live import latency
 from tltrack.services.scorer.store import Store
 
@@ -53,6 +54,9 @@ class _Scores:
     recoveries: int
     end_to_end: NDArray[np.float64]  #: ms, one per step
     split: NDArray[np.float64]  #: (n, 5) :func:`tltrack.live.latency.stages`, ms
+    nis: NDArray[np.float64]  #: the NIS of the filter's own z_k, at each step that had one
+    #: at each step with a full window: was its mean above (1), below (-1) or in (0) its band
+    band: NDArray[np.int64]
 
 
 def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
@@ -66,14 +70,21 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
     rows: dict[str, list[tuple[Any, ...]]] = defaultdict(list)
     for row in store.rows(
         "SELECT filter, k, pos, transfer_used, recovered, t_sensor, t_recv, t_sent, step_ms,"
-        " t_received, t_step FROM estimates WHERE episode = ?",
+        " t_received, t_step, nis, nis_window, nis_band FROM estimates WHERE episode = ?",
         episode,
     ):
         rows[row[0]].append(row[1:])
     scores = {}
     for name, mine in rows.items():  # (episode, filter, k) is the key: one row per step
-        k, sq, split = [], [], []
-        for step, pos, _tu, _rec, t_sensor, t_recv, t_sent, step_ms, t_received, t_step in mine:
+        k, sq, split, nis, band = [], [], [], [], []
+        for row in mine:
+            step, pos, _tu, _rec, t_sensor, t_recv, t_sent, step_ms, t_received, t_step = row[:10]
+            row_nis, window, edges = row[10:]
+            if row_nis is not None:
+                nis.append(row_nis)
+            if window is not None and edges is not None:
+                lo, hi = json.loads(edges)
+                band.append(1 if window > hi else -1 if window < lo else 0)
             if step in truth and pos is not None:
                 d = np.array(json.loads(pos)) - truth[step]
                 k.append(step)
@@ -88,8 +99,23 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
             recoveries=sum(r[3] or 0 for r in mine),
             end_to_end=np.array([(r[5] - r[4]) * 1e3 for r in mine]),
             split=np.array(split).reshape(-1, len(latency.STAGES)),
+            nis=np.array(nis),
+            band=np.array(band, dtype=np.int64),
         )
     return scores
+
+
+def _consistency(nis: NDArray[np.float64], band: NDArray[np.int64]) -> dict[str, Any]:
+    """The mean NIS, the shares of full windows above and below their band, and the verdict
+    (:func:`tltrack.filters.consistency.verdict`)."""
+    above = float(np.mean(band > 0)) if len(band) else 0.0
+    below = float(np.mean(band < 0)) if len(band) else 0.0
+    return {
+        "nis": float(np.mean(nis)) if len(nis) else None,
+        "nis_above_band": above,
+        "nis_below_band": below,
+        "consistency": consistency.verdict(above, below) if len(band) else None,
+    }
 
 
 class Summarizer:
@@ -137,6 +163,9 @@ class Summarizer:
                 "recoveries": sum(s.recoveries for s in mine),
                 "latency_ms": _percentiles(end_to_end[-1]),
                 "stages_ms": latency.p50(split[-1]),
+                **_consistency(
+                    np.concatenate([s.nis for s in mine]), np.concatenate([s.band for s in mine])
+                ),
             }
         rejected: dict[str, dict[str, int]] = {}
         dropped = 0

@@ -113,6 +113,7 @@ class SourceTracker:
             recovered=ep.tracker.recovered,
             t_step=t_step,
             step_ms=step_ms,
+            nis=ep.tracker.monitor.last.get(ep.tracker.name),
         ).publish(self.svc, keys.source_estimate(sid, e))
         self.svc.count("steps")
 

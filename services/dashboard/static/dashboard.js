@@ -319,9 +319,10 @@ function fillFilters(ep, colors) {
   if (!ep || ep.filters.length === 0) {
     const tr = body.insertRow();
     const td = el("td", "no estimates yet", "empty");
-    td.colSpan = 11;
+    td.colSpan = 12;
     tr.append(td);
     fillStages(undefined);
+    fillConsistency([]);
     return;
   }
   for (const f of ep.filters) {
@@ -336,9 +337,19 @@ function fillFilters(ep, colors) {
       el("td", fmt(f.rmse), "rmse"), el("td", fmt(f.rmse_k), "rmse-k"),
       el("td", fmt(f.latency_ms.p50, 1)), el("td", fmt(f.latency_ms.p95, 1)),
       el("td", fmt(f.latency_ms.p99, 1)), el("td", fmt(f.step_ms.p50, 1)),
-      el("td", tl ? f.transfer_used : "–"), el("td", tl ? f.transfer_skipped : "–"));
+      el("td", tl ? f.transfer_used : "–"), el("td", tl ? f.transfer_skipped : "–"),
+      el("td", fmt(f.nis_window), f.consistency ? "nis warn" : "nis"));
   }
   fillStages(ep.filters.find((f) => f.role === "tl"));
+  fillConsistency(ep.filters);
+}
+
+// What the NIS of a filter's own measurements says when its model does not fit the target
+// (tltrack.filters.consistency): no truth needed, so a deployment sees it too.
+function fillConsistency(filters) {
+  const list = $("consistency");
+  list.replaceChildren(...filters.filter((f) => f.consistency).map(
+    (f) => el("li", `${f.name}: ${f.consistency}`, "warning")));
 }
 
 const STAGE_LABEL = {

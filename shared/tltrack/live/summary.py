@@ -24,6 +24,7 @@ def table(summary: dict[str, Any]) -> Table:
         "p50 ms",
         "p95 ms",
         "p99 ms",
+        "NIS",
     ):
         t.add_column(col, justify="left" if col == "filter" else "right")
     for name, f in summary.get("filters", {}).items():
@@ -38,6 +39,7 @@ def table(summary: dict[str, Any]) -> Table:
             _ms(lat["p50"]),
             _ms(lat["p95"]),
             _ms(lat["p99"]),
+            _ms(f.get("nis")),
         )
     m = summary.get("messages", {})
     lat = summary.get("latency_ms", {})
@@ -55,5 +57,17 @@ def table(summary: dict[str, Any]) -> Table:
     return t
 
 
+def warnings(summary: dict[str, Any]) -> list[str]:
+    """What the NIS says of each filter whose model does not fit (the consistency monitor)."""
+    return [
+        f"{name}: {f['consistency']}"
+        for name, f in summary.get("filters", {}).items()
+        if f.get("consistency")
+    ]
+
+
 def print_summary(summary: dict[str, Any]) -> None:
-    Console(width=110).print(table(summary))
+    console = Console(width=110)
+    console.print(table(summary))
+    for line in warnings(summary):
+        console.print(f"[yellow]warning:[/yellow] {line}")

@@ -23,6 +23,7 @@ from tltrack.engine.montecarlo import check_filters
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import initial_estimate
 from tltrack.engine.setup import PRIMARY, Setup, from_spec
+from tltrack.filters import consistency
 from tltrack.filters.base import Array, Estimate
 from tltrack.live.held import Handling, Held
 from tltrack.live.service import Service
@@ -69,6 +70,38 @@ def wire_covariance(P: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class NisReading:
+    """A filter's consistency at a step: the NIS of its own z_k (None: no z_k), the mean of its
+    last NIS over the window (None until the window is full) and that mean's 99% band."""
+
+    nis: float | None
+    window: float | None
+    band: tuple[float, float]
+
+
+class NisMonitor:
+    """The NIS windows of an episode's filters (:mod:`tltrack.filters.consistency`): a collector
+    of the step driver's records."""
+
+    def __init__(self, n_z: int) -> None:
+        self.band = consistency.band(n_z)
+        self._windows: dict[str, consistency.Window] = {}
+        self.last: dict[str, NisReading] = {}
+
+    def __call__(self, record: StepRecord) -> None:
+        window = self._windows.setdefault(record.name, consistency.Window())
+        if record.nis is None:  # a step with no z_k leaves the window as it was
+            self.last[record.name] = NisReading(None, None, self.band)
+            return
+        nis = float(record.nis[0])
+        mean = float(window.push(record.nis)[0])
+        finite = np.isfinite(nis)
+        self.last[record.name] = NisReading(
+            nis if finite else None, mean if np.isfinite(mean) else None, self.band
+        )
+
+
+@dataclass(frozen=True)
 class StepReport:
     """Filter ``name``'s estimate at the step of ``z``, begun at ``t_step``: what a tracker
     publishes. With when ``z`` arrived, it times each stage of the latency."""
@@ -82,6 +115,7 @@ class StepReport:
     recovered: bool
     t_step: float
     step_ms: float
+    nis: NisReading | None = None
 
     def message(self) -> EstimateMsg:
         return EstimateMsg(
@@ -99,6 +133,9 @@ class StepReport:
             step_ms=self.step_ms,
             t_received=self.z.received_at,
             t_step=self.t_step,
+            nis=None if self.nis is None else self.nis.nis,
+            nis_window=None if self.nis is None else self.nis.window,
+            nis_band=None if self.nis is None else list(self.nis.band),
         )
 
     def publish(self, svc: Service, key: str) -> None:
@@ -123,7 +160,8 @@ class SourceEpisode:
         self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
         self._link: Link = (spec.name, source_id)
         self._estimates: dict[str, Estimate] = {}
-        self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep])
+        self.monitor = NisMonitor(self.own.model.n_z)
+        self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep, self.monitor])
         self.k = 0
 
     def _keep(self, record: StepRecord) -> None:
@@ -178,7 +216,8 @@ class PrimaryEpisode:
         if robust:
             check_filters(cfg, [self.tl_name])
         specs = [parse(self.tl_name), parse(self.iso_name)]
-        self._half = Primaries(setup, specs, x0_hat, [run], share_twins=True)
+        self.monitor = NisMonitor(self.own.model.n_z)
+        self._half = Primaries(setup, specs, x0_hat, [run], [self.monitor], share_twins=True)
         self._k = {self.tl_name: 0, self.iso_name: 0}
 
     def _observe(self, z: Measurement | None) -> Observation | None:

@@ -37,9 +37,10 @@ from tltrack.models.kinds import MOTIONS, SENSORS
 
 #: 2: Truth and EstimateMsg carry ``pos``, the position in ``x`` (the referee needs no state
 #: layout), EstimateMsg whether the filter was reinitialised (``recovered``), a Transfer the
-#: sensor it is expressed in (``sensor``); sizes follow n_x and n_z
-SCHEMA_VERSION = 2
-SUPPORTED_VERSIONS = frozenset({2})
+#: sensor it is expressed in (``sensor``); sizes follow n_x and n_z.
+#: 3: EstimateMsg carries the NIS of the filter's own measurement, its window's mean and band
+SCHEMA_VERSION = 3
+SUPPORTED_VERSIONS = frozenset({3})
 
 MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
@@ -280,6 +281,11 @@ class EstimateMsg(Message):
     step_ms: Annotated[float, Field(ge=0, allow_inf_nan=False)]
     t_received: Timestamp | None = None  #: when the tracker received z_k (the latency's stages)
     t_step: Timestamp | None = None  #: when the step began
+    #: the NIS of the filter's own z_k before its update (None: no z_k), the mean over its last
+    #: 20 steps (None until 20), and that mean's 99% band (tltrack.filters.consistency)
+    nis: Annotated[float, Field(ge=0, allow_inf_nan=False)] | None = None
+    nis_window: Annotated[float, Field(ge=0, allow_inf_nan=False)] | None = None
+    nis_band: Vector | None = None
 
     @field_validator("x")
     @classmethod
@@ -294,6 +300,10 @@ class EstimateMsg(Message):
     @model_validator(mode="after")
     def _P_ok(self) -> EstimateMsg:
         _check_covariance(self.P, len(self.x), "P")
+        if self.nis_band is not None:
+            lo, hi = _check_vector(self.nis_band, (2,), "nis_band")
+            if not 0 <= lo <= hi:
+                raise PydanticCustomError("invalid", "nis_band must be 0 <= low <= high")
         return self
 
 
