@@ -6,7 +6,9 @@ pytestmark = pytest.mark.unit
 
 
 def test_reproduce_writes_every_table_and_figure(tmp_path):
-    r = CliRunner().invoke(app, ["reproduce", "--runs", "2", "--out", str(tmp_path)])
+    # --workers 1: this process alone (a pool of every core is slower beside other tests)
+    args = ["reproduce", "--runs", "2", "--workers", "1", "--out", str(tmp_path)]
+    r = CliRunner().invoke(app, args)
     assert r.exit_code == 0, r.output
     report = (tmp_path / "report.md").read_text()
     for heading in (
@@ -58,7 +60,7 @@ def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
 
 def test_the_lost_track_table_alone_has_both_particle_filters_and_the_ukf(tmp_path):
     r = CliRunner().invoke(
-        app, ["reproduce", "--runs", "2", "--losses-only", "--out", str(tmp_path)]
+        app, ["reproduce", "--runs", "2", "--losses-only", "--workers", "1", "--out", str(tmp_path)]
     )
     assert r.exit_code == 0, r.output
     table = (tmp_path / "losses.md").read_text()
