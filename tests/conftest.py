@@ -12,6 +12,7 @@ the xdist group ``live`` so that they never run beside each other.
 """
 
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -31,3 +32,21 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         raise pytest.UsageError(
             f"every test carries exactly one of the marks {', '.join(TIERS)}:\n" + "\n".join(wrong)
         )
+
+
+@pytest.fixture(autouse=True)
+def _kinds_imported_by_a_test_stay_in_that_test() -> Iterator[None]:
+    """A test that names a kind by import path (``doubles:PositionSensor``) registers it in this
+    process, and every stack started afterwards in the same process passes it on to its services
+    (``plugins.passed_on``), which cannot import tests/doubles.py and exit: under pytest-xdist,
+    whether a live test failed so depended on which unit tests its worker had run before."""
+    from tltrack.config import plugins
+
+    saved = {
+        concept: (dict(r._kinds), dict(r.imported), r._plugins_loaded)
+        for concept, r in plugins.REGISTRIES.items()
+    }
+    yield
+    for concept, (kinds, imported, loaded) in saved.items():
+        r = plugins.REGISTRIES[concept]
+        r._kinds, r.imported, r._plugins_loaded = kinds, imported, loaded
