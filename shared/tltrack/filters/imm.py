@@ -59,6 +59,8 @@ class InteractingMultipleModel:
         B = self.filters[0].m.shape[1]
         #: (M, B): the mode probabilities, posterior after an update, predicted after a predict
         self.mu = np.repeat(np.asarray(initial, dtype=float)[:, None], B, axis=1)
+        #: per run, log p(statements | the past) of the last update: log sum_j c_j Lambda_j
+        self.loglik = np.zeros(B)
 
     @property
     def mode_probabilities(self) -> Array:
@@ -86,11 +88,14 @@ class InteractingMultipleModel:
         for f in self.filters:
             f.update(observations)
         if not observations:
+            self.loglik = np.zeros(self.mu.shape[1])
             return
         logw = np.log(np.maximum(self.mu, 1e-300)) + np.stack([f.loglik for f in self.filters])
-        logw -= logw.max(axis=0, keepdims=True)
-        w = np.exp(logw)
-        self.mu = w / w.sum(axis=0, keepdims=True)
+        top = logw.max(axis=0, keepdims=True)
+        w = np.exp(logw - top)
+        total = w.sum(axis=0, keepdims=True)
+        self.loglik = (top + np.log(total))[0]
+        self.mu = w / total
 
     def estimate(self) -> Estimate:
         """The mixture's mean and covariance."""

@@ -1,0 +1,81 @@
+"""``tltrack fit``: a motion model's process noise, fitted to recorded tracks."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from tltrack.app.common import app, console
+
+
+@app.command(
+    epilog="Examples:\n\n    tltrack fit --truth-file examples/tracks/ais.csv --model cv\n\n"
+    "    tltrack fit --truth-file a.csv --truth-file b.csv --model modes --out aircraft.toml"
+)
+def fit(
+    truth_file: Annotated[
+        list[Path], typer.Option(help="a recorded track (CSV t,x,y or t,lat,lon); repeatable")
+    ],
+    model: Annotated[
+        str, typer.Option(help="cv, ct, or modes (a straight and a turning mode)")
+    ] = "cv",
+    out: Annotated[
+        Path | None, typer.Option(help="write the fitted noise as a config file (TOML) here")
+    ] = None,
+    Ts: Annotated[
+        float, typer.Option("--ts", help="the filters' period, for the modes' transition [s]")
+    ] = 1.0,
+) -> None:
+    """Fit process noise by maximum likelihood on the tracks' raw reports, at their own times;
+    print each parameter with its 95% interval, and write a config that uses them."""
+    from rich.table import Table
+
+    from tltrack.config.truth_file import TruthFileError, read_track, to_local
+    from tltrack.engine import fit as fitting
+
+    if model not in fitting.PARAMETERS:
+        console.print(f"[red]error:[/red] --model: use {', '.join(fitting.PARAMETERS)}")
+        raise typer.Exit(2)
+    tracks = []
+    try:
+        for path in truth_file:
+            track = read_track(path)
+            xy, _origin = to_local(track)
+            tracks.append(fitting.Reports(path.name, track.t - track.t[0], xy))
+    except (TruthFileError, ValueError) as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+    with console.status(f"fitting {model} to {sum(len(r.t) for r in tracks)} reports"):
+        result = fitting.fit(tracks, model)  # type: ignore[arg-type]
+    t = Table(title=f"{model}: maximum likelihood on {result.reports} reports")
+    for col in ("parameter", "value", "95% interval"):
+        t.add_column(col, justify="left" if col == "parameter" else "right")
+    for name, v in result.values.items():
+        lo, hi = result.intervals[name]
+        t.add_row(name, f"{v:.4g}", f"{lo:.4g} .. {hi:.4g}")
+    t.caption = f"log-likelihood {result.loglik:.2f}"
+    console.print(t)
+    if out is not None:
+        out.write_text(config_text(result, Ts))
+        console.print(f"wrote {out}")
+
+
+def config_text(result: Any, Ts: float) -> str:
+    """A config (TOML) with the fitted noise: the scenario's q1 (and q2), or the modes and their
+    chain over one period Ts (a switch with probability (1 - exp(-2 lambda Ts)) / 2)."""
+    v = result.values
+    head = f"# tltrack fit --model {result.kind} on {', '.join(result.tracks)}\n"
+    if result.kind == "cv":
+        return head + f'scenario = "cv"\nq1 = {v["q1"]:.6g}\n'
+    if result.kind == "ct":
+        return head + f'scenario = "ct"\nq1 = {v["q1"]:.6g}\nq2 = {v["q2"]:.6g}\n'
+    s = 0.5 * (1.0 - math.exp(-2.0 * v["switch_rate"] * Ts))
+    return head + (
+        f'scenario = "ct"\nTs = {Ts:g}\n'
+        f"mode_transition = [[{1 - s:.6g}, {s:.6g}], [{s:.6g}, {1 - s:.6g}]]\n\n"
+        f'[[motion_modes]]\nkind = "cv"\nq1 = {v["q1_straight"]:.6g}\n\n'
+        f'[[motion_modes]]\nkind = "ct"\nq1 = {v["q1_turn"]:.6g}\nq2 = {v["q2_turn"]:.6g}\n'
+    )
