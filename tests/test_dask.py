@@ -194,10 +194,13 @@ class Cluster:
         return Client(self.address, timeout=30, set_as_default=False)
 
     def worker_pids(self) -> dict[str, int]:
-        """worker name -> the id of its worker process (the nanny's child)."""
+        """worker name -> the id of its worker process (the nanny's child), of the workers the
+        scheduler knows and that answer. (A worker may come or go between the two calls, as a
+        restarted one does: it is left out, not a KeyError or a CommClosedError.)"""
         with self.client() as c:
             names = {a: w["name"] for a, w in c.scheduler_info(n_workers=-1)["workers"].items()}
-            return {names[a]: pid for a, pid in c.run(os.getpid).items()}
+            pids = c.run(os.getpid, workers=list(names), on_error="return")
+            return {names[a]: pid for a, pid in pids.items() if isinstance(pid, int)}
 
     def wait_for_workers(self, n: int, timeout: float) -> None:
         with self.client() as c:
