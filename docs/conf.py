@@ -33,6 +33,9 @@ extensions = [
     "sphinx_gallery.gen_gallery",
     "tltrack_reference",
 ]
+# TLTRACK_DOCS_PROFILE=1 make docs: how long each page took to read
+if os.environ.get("TLTRACK_DOCS_PROFILE") == "1":
+    extensions.append("sphinx.ext.duration")
 # The studies' pages (docs/results/, from papers/<name>/README.md) bring their own link handler.
 if (DOCS / "results" / "papers_links.py").exists():
     sys.path.insert(0, str(DOCS / "results"))
@@ -41,6 +44,8 @@ if (DOCS / "results" / "papers_links.py").exists():
 # Markdown pages (myst) and the reStructuredText that sphinx-gallery and the API stubs write.
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
+# option names stay ``--flags`` (no en dashes) and quotes stay straight, as in a terminal
+smartquotes = False
 exclude_patterns = [
     "_build",
     "_legacy_readme.md",

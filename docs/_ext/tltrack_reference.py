@@ -30,6 +30,7 @@ import pkgutil
 import re
 import types
 import typing
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -45,6 +46,54 @@ from sphinx.util.docutils import SphinxDirective
 
 #: the ``tltrack`` command as a click group, for sphinx-click's ``click`` directive
 cli = typer.main.get_command(tltrack.app.app)
+
+
+class _NeverACollection:
+    """Typer has no ``CommandCollection``: nothing is one."""
+
+
+class _ChoiceMeta(type):
+    def __instancecheck__(cls, obj: object) -> bool:
+        return bool(getattr(obj, "choices", None))
+
+
+class _Choice(metaclass=_ChoiceMeta):
+    """A parameter's type with choices (Typer's descriptor of a ``Literal`` or an ``Enum``)."""
+
+
+def _typer_click() -> types.SimpleNamespace:
+    """The names sphinx-click takes from ``click``, from the copy of click Typer carries.
+
+    Typer (0.29) builds its commands on its own ``typer._click``, not on the ``click`` package, so
+    sphinx-click's ``isinstance`` checks against ``click`` would refuse them. Its group, option and
+    argument classes have click's attributes, which is all sphinx-click reads.
+    """
+    import typer._click as tclick
+    import typer._click.formatting
+    import typer.core
+
+    # the two attributes of click's parameters that sphinx-click reads and Typer's lack
+    for cls in (typer.core.TyperOption, typer.core.TyperArgument):
+        if not hasattr(cls, "type"):
+            cls.type = property(lambda self: self.type_descriptor)  # type: ignore[attr-defined]
+    if not hasattr(typer.core.TyperArgument, "human_readable_name"):
+        typer.core.TyperArgument.human_readable_name = property(  # type: ignore[attr-defined]
+            lambda self: self.metavar or (self.name or "").upper()
+        )
+
+    return types.SimpleNamespace(
+        Context=tclick.Context,
+        Command=tclick.Command,
+        BaseCommand=tclick.Command,
+        Group=typer.core.TyperGroup,
+        MultiCommand=typer.core.TyperGroup,
+        CommandCollection=_NeverACollection,
+        Argument=typer.core.TyperArgument,
+        Choice=_Choice,
+        core=types.SimpleNamespace(Option=typer.core.TyperOption),
+        formatting=typer._click.formatting,
+    )
+
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -468,20 +517,18 @@ class KeysDirective(_RstDirective):
 
 def read_json5(path: Path) -> Any:
     """The JSON5 subset of the package's access files: comments, bare keys, trailing commas."""
-    out, tokens = (
-        [],
-        re.finditer(r'"(?:[^"\\]|\\.)*"|//[^\n]*|/\*.*?\*/|[^"/]+|/', path.read_text(), re.S),
-    )
-    for t in tokens:
-        s = t.group(0)
-        if s.startswith("//") or s.startswith("/*"):
-            continue
-        if not s.startswith('"'):
-            s = re.sub(r"([{,]\s*)([A-Za-z_]\w*)\s*:", r'\1"\2":', s)
-            s = re.sub(r",(\s*[}\]])", r"\1", s)
-        out.append(s)
-    text = "".join(out)
+    strings: list[str] = []
+
+    def keep(m: re.Match[str]) -> str:
+        if m.group(0).startswith("/"):
+            return ""  # a comment
+        strings.append(m.group(0))
+        return f"\x00{len(strings) - 1}\x00"
+
+    text = re.sub(r'"(?:[^"\\]|\\.)*"|//[^\n]*|/\*.*?\*/', keep, path.read_text(), flags=re.S)
+    text = re.sub(r"([{,]\s*)([A-Za-z_]\w*)\s*:", r'\1"\2":', text)
     text = re.sub(r",(\s*[}\]])", r"\1", text)
+    text = re.sub(r"\x00(\d+)\x00", lambda m: strings[int(m.group(1))], text)
     return json.loads(text)
 
 
@@ -547,6 +594,38 @@ class AclDirective(_RstDirective):
                 rows,
                 "12 36 30 22",
             ),
+        ]
+
+
+# ---- the operator manifest ------------------------------------------------------------------
+
+
+class OperatorsDirective(_RstDirective):
+    """``.. tltrack-operators::``: the package manifest's operators, and the files that follow."""
+
+    def rst(self) -> list[str]:
+        from tltrack.live import access
+        from tltrack.live.manifest import DEFAULT, load_manifest
+
+        self.env.note_dependency(str(DEFAULT))
+        manifest = load_manifest(DEFAULT)
+        rows = [
+            [
+                op.role,
+                f"``{op.path}``",
+                ", ".join(f"``{i}``" for i in op.identities),
+                f"``{op.router_identity}``" if op.router_identity else "(dialled by all)",
+            ]
+            for op in manifest.operators
+        ]
+        files = sorted(str(p.relative_to(ROOT)) for p in access.repository_files(manifest, ROOT))
+        return [
+            *list_table(("role", "operator path", "identities", "its router dials as"), rows),
+            ":func:`tltrack access generate <tltrack.live.access.repository_files>` writes these "
+            "files from it:",
+            "",
+            *[f"- ``{f}``" for f in files],
+            "",
         ]
 
 
@@ -667,8 +746,10 @@ def _from_outside_module(module: str, name: str) -> bool:
         if not OUTSIDE.match(dotted):
             continue
         try:
-            if hasattr(importlib.import_module(dotted), name):
-                return True
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # NumPy warns on some names it will define
+                if hasattr(importlib.import_module(dotted), name):
+                    return True
         except ImportError:
             continue
     return False
@@ -776,6 +857,18 @@ def adjust_sources(app: Sphinx, docname: str, source: list[str]) -> None:
         source[0] = ":orphan:\n\n" + source[0]
 
 
+#: ``|x|`` where reStructuredText would read a substitution: the code writes bars for absolute
+#: values and norms, and defines no substitution
+_BARS = re.compile(r"(?<![\w`\\|])\|(?=\S)([^|`\n]*?\S)\|(?![\w|_`])")
+
+
+def escape_bars(
+    app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]
+) -> None:
+    """``|x|`` in a docstring stays ``|x|`` on the page."""
+    lines[:] = [_BARS.sub(r"\\|\1\\|", line) for line in lines]
+
+
 def drop_foreign_docstrings(
     app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]
 ) -> None:
@@ -795,16 +888,46 @@ def drop_foreign_docstrings(
             return
 
 
+_LONE_STAR = re.compile(r"(?<![*\\])\*(?![*])")
+_TRAILING_UNDERSCORE = re.compile(r"(?<=\w)_(?=\\\*|[\s),.;:!?]|$)")
+
+
+def _markdown_as_rst(line: str) -> str:
+    if line.lstrip().startswith(".. "):
+        return line  # sphinx-click's own directives
+    parts = re.split(r"(``[^`]+``|`[^`\n]+`)", line)
+    for i, part in enumerate(parts):
+        if part.startswith("`"):
+            parts[i] = "``" + part.strip("`") + "``"
+        else:
+            parts[i] = _TRAILING_UNDERSCORE.sub(r"\\_", _LONE_STAR.sub(r"\\*", part))
+    return "".join(parts)
+
+
+def click_text(app: Sphinx, ctx: Any, lines: list[str]) -> None:
+    """The CLI's help is Markdown (Typer's ``rich_markup_mode``): ``*`` and a trailing ``_`` are
+    characters, and `` `x` `` is code, not reStructuredText's emphasis, reference and
+    interpreted text."""
+    lines[:] = [_markdown_as_rst(line) for line in lines]
+
+
 def setup(app: Sphinx) -> dict[str, Any]:
+    import sphinx_click.ext
+
+    sphinx_click.ext.click = _typer_click()  # type: ignore[attr-defined]
     app.add_directive("tltrack-model", ModelDirective)
     app.add_directive("tltrack-scenarios", ScenariosDirective)
     app.add_directive("tltrack-kinds", KindsDirective)
     app.add_directive("tltrack-messages", MessagesDirective)
     app.add_directive("tltrack-keys", KeysDirective)
     app.add_directive("tltrack-acl", AclDirective)
+    app.add_directive("tltrack-operators", OperatorsDirective)
     app.connect("builder-inited", write_api_pages)
     app.connect("missing-reference", resolve_reference)
     app.connect("autodoc-skip-member", skip_modules)
     app.connect("autodoc-process-docstring", drop_foreign_docstrings)
+    app.connect("autodoc-process-docstring", escape_bars)
+    for what in ("description", "options", "arguments", "epilog"):
+        app.connect(f"sphinx-click-process-{what}", click_text)
     app.connect("source-read", adjust_sources)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
