@@ -233,7 +233,7 @@ def _fit_cv(tracks: Sequence[Reports]) -> Fit:
                [r.name for r in tracks])  # fmt: skip
 
 
-def _hessian(f: Callable[[Array], float], x: Array, h: float = 1e-2) -> Array:
+def _hessian(f: Callable[[Array], float], x: Array, h: float = 0.1) -> Array:
     """The Hessian of f at x by central differences (step h in log-space)."""
     n = len(x)
     H = np.empty((n, n))
@@ -251,7 +251,15 @@ def fit(tracks: Sequence[Reports], kind: Kind = "cv", start: dict[str, float] | 
     if kind == "cv":
         return _fit_cv(tracks)
     names = PARAMETERS[kind]
-    first = {**START, **(start or {})}
+    cv = _fit_cv(tracks).values  # the nested straight model's fit: where the search starts
+    first = {
+        **START,
+        "q1": cv["q1"],
+        "q1_straight": cv["q1"],
+        "q1_turn": cv["q1"],
+        "sigma": cv["sigma"],
+        **(start or {}),
+    }
     theta0 = np.log([first[n] for n in names])
 
     def nll(theta: Array) -> float:
@@ -264,7 +272,11 @@ def fit(tracks: Sequence[Reports], kind: Kind = "cv", start: dict[str, float] | 
     best = minimize(nll, theta0, method="Nelder-Mead", options=options)
     theta, top = best.x, -float(best.fun)
     values = dict(zip(names, np.exp(theta).tolist(), strict=True))
-    se = np.sqrt(np.clip(np.diag(np.linalg.pinv(_hessian(nll, theta))), 0.0, None))
+    H = _hessian(nll, theta)
+    w = np.linalg.eigvalsh(H)
+    # a likelihood too flat (or too rough) to bound a parameter gives no interval, not a false one
+    var = np.diag(np.linalg.inv(H)) if w.min() > 0 else np.full(len(names), np.inf)
+    se = np.sqrt(np.where(var > 0, var, np.inf))
     z = float(norm.ppf(0.975))
     intervals = {
         n: (float(np.exp(theta[i] - z * se[i])), float(np.exp(theta[i] + z * se[i])))
