@@ -22,7 +22,15 @@ sys.path.insert(0, str(Path(__file__).parent))
 TIERS = ("unit", "integration", "system")
 
 
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """``--dist loadgroup`` under pytest >= 9.2: pytest-xdist 3.8 marks a test's group by
+    assigning ``item._nodeid``, which pytest 9.2 no longer reads (the node id is ``item._id``), so
+    every ``xdist_group`` was ignored and the tests of a group spread over the workers (two compose
+    stacks at once, fighting for the dashboard's host port). Put the group in the id as xdist
+    means to: ``<nodeid>@<group>``, which the controller's scheduler reads.
+
+    And every test carries exactly one tier."""
     wrong = []
     for item in items:
         tiers = [t for t in TIERS if any(m.name == t for m in item.iter_markers())]
@@ -32,6 +40,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         raise pytest.UsageError(
             f"every test carries exactly one of the marks {', '.join(TIERS)}:\n" + "\n".join(wrong)
         )
+    if not getattr(config.option, "loadgroup", False):
+        return
+    for item in items:
+        names = {
+            str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+            for m in item.iter_markers("xdist_group")
+        }
+        suffix = "@" + "_".join(sorted(names))
+        if names and not item.nodeid.endswith(suffix):
+            from _pytest.nodeid import NodeId  # pytest >= 9.2; older ones take xdist's _nodeid
+
+            item._id = NodeId.parse(item.nodeid + suffix)  # type: ignore[attr-defined]
 
 
 @pytest.fixture(autouse=True)
