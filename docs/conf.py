@@ -88,7 +88,8 @@ mathjax_path = "mathjax/tex-svg.js"
 
 html_theme = "furo"
 html_title = "tltrack"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["tltrack.css"]
 html_last_updated_fmt = None
 html_show_sourcelink = False
 html_copy_source = False

@@ -23,6 +23,7 @@ own page.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import json
@@ -96,6 +97,11 @@ def _typer_click() -> types.SimpleNamespace:
 
 
 ROOT = Path(__file__).resolve().parents[2]
+
+#: ``|x|`` where reStructuredText would read a substitution: the code writes bars for absolute
+#: values and norms, and defines no substitution
+_BARS = re.compile(r"(?<![\w`\\|])\|(?=\S)([^|`\n]*?\S)\|(?![\w|_`])")
+
 
 # ---- small helpers --------------------------------------------------------------------------
 
@@ -375,6 +381,8 @@ class KindsDirective(_RstDirective):
         out: list[str] = []
         for name in registry.names():
             cls = registry.get(name)
+            if not cls.__module__.startswith("tltrack."):
+                continue  # a plugin this process loaded (a tutorial's), not the package's kind
             out += [f".. rubric:: ``{name}``", ""]
             said = [f"Class :class:`~{cls.__module__}.{cls.__qualname__}`."]
             if hasattr(cls, "components"):
@@ -387,7 +395,7 @@ class KindsDirective(_RstDirective):
                     else "Deterministic (no particles)."
                 )
             out += [" ".join(said), ""]
-            doc = _first_paragraph(_doc(cls))
+            doc = _BARS.sub(r"\\|\1\\|", _first_paragraph(_doc(cls)))
             if doc:
                 out += [doc, ""]
             if cls.parameters:
@@ -597,6 +605,53 @@ class AclDirective(_RstDirective):
         ]
 
 
+# ---- the services' settings ------------------------------------------------------------------
+
+
+def settings_classes() -> list[tuple[str, type]]:
+    """(module, class) of every pydantic-settings class of the services and the transport."""
+    from pydantic_settings import BaseSettings
+
+    found = []
+    for name in ["tltrack.wire.transport", *_modules("tltrack.services")]:
+        module = importlib.import_module(name)
+        for obj in vars(module).values():
+            if (
+                isinstance(obj, type)
+                and issubclass(obj, BaseSettings)
+                and obj is not BaseSettings
+                and obj.__module__ == name
+            ):
+                found.append((name, obj))
+    return found
+
+
+class SettingsDirective(_RstDirective):
+    """``.. tltrack-settings::``: every service's settings, as environment variables and flags."""
+
+    def rst(self) -> list[str]:
+        out: list[str] = []
+        for module, cls in settings_classes():
+            prefix = cls.model_config.get("env_prefix", "")
+            prog = cls.model_config.get("cli_prog_name")
+            title = f"``{prog}``" if prog else f":class:`~{module}.{cls.__qualname__}`"
+            out += [f".. rubric:: {title}: ``{prefix}*``", ""]
+            doc = _first_paragraph(_doc(cls))
+            if doc:
+                out += [doc, ""]
+            rows = []
+            for row, name in zip(model_rows(cls), cls.model_fields, strict=True):
+                env = f"``{prefix}{name.upper()}``"
+                flag = f"``--{name}``" if prog else ""
+                rows.append([env, flag, row[1], row[3], row[4], row[5]])
+            out += list_table(
+                ("variable", "flag", "type", "default", "bounds", "meaning"),
+                rows,
+                "26 16 14 12 10 22",
+            )
+        return out
+
+
 # ---- the operator manifest ------------------------------------------------------------------
 
 
@@ -666,45 +721,45 @@ def _write(path: Path, text: str) -> None:
 
 
 def write_api_pages(app: Sphinx) -> None:
-    """``reference/api/``: an index by layer and one page per module (generated; git-ignored)."""
+    """``reference/api/``: the layer map, and one page per layer with every module of it
+    (generated; git-ignored). One page per layer, not per module: the site's navigation is
+    computed for every page, so a hundred pages more cost the build a minute."""
     out = Path(app.srcdir) / "reference" / "api"
     index = [
         "API",
         "===",
         "",
-        "Every module of the package, from its docstrings, layer by layer: the layer map is the "
-        "package's own docstring, below.",
+        "Every module of the package, from its docstrings, layer by layer. The layer map is the "
+        "package's own docstring:",
         "",
         ".. automodule:: tltrack",
         "   :no-members:",
         "",
+        ".. toctree::",
+        "   :maxdepth: 2",
+        "",
     ]
-    wanted = set()
+    wanted = {"index.rst"}
     for n, (_text, packages) in enumerate(layers(), start=1):
+        page = f"layer-{n}-" + "-".join(p.rsplit(".", 1)[-1] for p in packages)
+        wanted.add(f"{page}.rst")
+        index.append(f"   {page}")
         title = f"{n}. " + ", ".join(packages)
-        index += [title, "-" * len(title), "", ".. toctree::", "   :maxdepth: 1", ""]
+        body = [title, "=" * len(title), ""]
         for package in packages:
             for name in _modules(package):
                 # imported now, before autodoc reads any class: documenting a pydantic model
                 # rewrites annotations of pydantic's BaseModel, and a model defined after that
                 # with extra fields (FastAPI's, imported by the dashboard) fails to build
                 importlib.import_module(name)
-                wanted.add(f"{name}.rst")
-                index.append(f"   {name}")
-                body = [
-                    f"``{name}``",
-                    "=" * (len(name) + 4),
-                    "",
-                    f".. automodule:: {name}",
-                    "   :ignore-module-all:",
-                    "   :undoc-members:",
-                    "",
-                ]
-                _write(out / f"{name}.rst", "\n".join(body))
-        index.append("")
-    _write(out / "index.rst", "\n".join(index))
+                heading = f"``{name}``"
+                body += [heading, "-" * len(heading), ""]
+                body += [f".. automodule:: {name}", "   :ignore-module-all:", "   :undoc-members:"]
+                body.append("")
+        _write(out / f"{page}.rst", "\n".join(body))
+    _write(out / "index.rst", "\n".join([*index, ""]))
     for stale in out.glob("*.rst"):
-        if stale.name != "index.rst" and stale.name not in wanted:
+        if stale.name not in wanted:
             stale.unlink()
 
 
@@ -720,6 +775,7 @@ OUTSIDE = re.compile(
 )
 
 
+@functools.cache
 def _imports_of(module: str) -> dict[str, str]:
     """name -> the module it is imported from, for every import in ``module``'s source
     (those under ``if TYPE_CHECKING:`` too)."""
@@ -740,6 +796,7 @@ def _imports_of(module: str) -> dict[str, str]:
     return out
 
 
+@functools.cache
 def _from_outside_module(module: str, name: str) -> bool:
     """Does a module that ``module`` imports from outside tltrack have an attribute ``name``?"""
     for dotted in _imports_of(module).values():
@@ -857,11 +914,6 @@ def adjust_sources(app: Sphinx, docname: str, source: list[str]) -> None:
         source[0] = ":orphan:\n\n" + source[0]
 
 
-#: ``|x|`` where reStructuredText would read a substitution: the code writes bars for absolute
-#: values and norms, and defines no substitution
-_BARS = re.compile(r"(?<![\w`\\|])\|(?=\S)([^|`\n]*?\S)\|(?![\w|_`])")
-
-
 def escape_bars(
     app: Sphinx, what: str, name: str, obj: Any, options: Any, lines: list[str]
 ) -> None:
@@ -922,6 +974,7 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.add_directive("tltrack-keys", KeysDirective)
     app.add_directive("tltrack-acl", AclDirective)
     app.add_directive("tltrack-operators", OperatorsDirective)
+    app.add_directive("tltrack-settings", SettingsDirective)
     app.connect("builder-inited", write_api_pages)
     app.connect("missing-reference", resolve_reference)
     app.connect("autodoc-skip-member", skip_modules)

@@ -361,6 +361,7 @@ class Tick(Message):
     type: Literal["tick"] = "tick"
 
 
+#: every message class by its ``type`` tag
 MESSAGE_TYPES: dict[str, type[Message]] = {
     m.TYPE: m for m in (Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd, Tick)
 }
