@@ -89,3 +89,39 @@ def test_modes_are_refused_unless_they_fit_together() -> None:
         make_config(motion_modes=two, mode_transition=[[0.9, 0.1], [0.5, 0.6]])
     with pytest.raises(ConfigError, match="no q2"):
         make_config(motion_modes=[{"kind": "cv", "q1": 1.0, "q2": 1.0}])
+
+
+def test_the_compiled_propagation_of_mixed_modes_is_each_mode_s_model() -> None:
+    """Particles of three modes in one run: the compiled kernel moves each as its own mode's f
+    and Q_sqrt do in NumPy, from the same Gaussians (and the look-ahead's means likewise)."""
+    from tltrack.filters.kernels.gaussians import gaussians, uniforms_per_run
+    from tltrack.filters.particle_modes import ParticleModes
+    from tltrack.models.coordinated_turn import CoordinatedTurn
+    from tltrack.models.modes import MotionModes, Straight
+
+    models = (Straight(1.0, 1.0), CoordinatedTurn(1.0, 4.0, 1e-2), CoordinatedTurn(1.0, 4.0, 1e-4))
+    chain = MotionModes(("cv", "ct1", "ct2"), models, np.full((3, 3), 1 / 3), np.full(3, 1 / 3))
+    B, N = 2, 700
+    rng = np.random.default_rng(0)
+    pm = ParticleModes(chain, [np.random.default_rng(b) for b in range(B)], N)
+    assert pm._mixed is not None
+    x = np.ascontiguousarray(
+        rng.normal(size=(5, B, N)) * [[[100]], [[50]], [[100]], [[50]], [[0.05]]]
+    )
+    x[4, 0, :5] = [0.0, 1e-7, -1e-7, 40.0, -3.0]  # turn rates tiny, and beyond the fast sin/cos
+    anc = rng.integers(0, N, size=(B, N + 1))
+    modes = rng.integers(0, 3, size=(B, N))
+    U = rng.random((B, uniforms_per_run(3, N)))
+
+    def normals() -> np.ndarray:
+        E = np.empty((B, 3, N))
+        gaussians(U, E)
+        return np.ascontiguousarray(E.transpose(1, 0, 2))
+
+    compiled = pm.propagate(x, anc, modes, U, normals)
+    means = pm.means(x, modes)
+    pm._mixed = None
+    np.testing.assert_allclose(
+        compiled, pm.propagate(x, anc, modes, U, normals), rtol=1e-9, atol=1e-9
+    )
+    np.testing.assert_allclose(means, pm.means(x, modes), rtol=1e-9, atol=1e-9)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +20,7 @@ from tltrack.filters.kernels import auxiliary, propagation, range_bearing
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.constant_velocity import ConstantVelocity
 from tltrack.models.coordinated_turn import CoordinatedTurn
+from tltrack.models.modes import Straight
 from tltrack.models.observation import Observation
 from tltrack.models.range_bearing import RangeBearing
 
@@ -103,6 +104,55 @@ def propagator(model: MotionModel, N: int) -> Propagator | None:
     if entry is None or np.shape(model.Q_sqrt) != entry[0]:
         return None
     return entry[1](model, N)
+
+
+@dataclass
+class ModesPropagator:
+    """The jump-Markov coordinated turn's propagation: each particle in its own mode, every mode
+    a :class:`~tltrack.models.coordinated_turn.CoordinatedTurn` or a
+    :class:`~tltrack.models.modes.Straight` of one period."""
+
+    T: float
+    small: float
+    Ls: Array  # (M, 5, 3): each mode's Q_sqrt
+    keep: Array  # (M,): 1 where the mode turns, 0 where it holds Omega at 0
+    N: int
+    e: Array = field(init=False)
+    g: Array = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.e = np.empty((3, self.N))
+        self.g = np.empty((5, propagation.BLOCK))
+
+    def __call__(
+        self, src: Array, anc: NDArray[np.int64], modes: NDArray[np.int64], U: Array, out: Array,
+        b: int,
+    ) -> None:  # fmt: skip
+        """Propagate run b (its uniforms U (1, ...)), particle i in mode modes[b, i]."""
+        propagation.modes_ct_predict(
+            src, anc, U, self.e, self.g, modes, self.keep, self.Ls, self.T, self.small, out, b
+        )
+
+    def mean(self, x: Array, modes: NDArray[np.int64], out: Array) -> None:
+        """out = f_m(x), particle by particle in its mode, every run."""
+        auxiliary.modes_ct_mean(x, modes, self.keep, self.T, self.small, out)
+
+
+def modes_propagator(models: Sequence[MotionModel], N: int) -> ModesPropagator | None:
+    """The compiled propagation of a cloud whose particles move in these modes, or None (the
+    generic path): every mode a coordinated turn or straight, of one period."""
+    if not all(type(m) in (CoordinatedTurn, Straight) for m in models):
+        return None
+    turns = cast("list[CoordinatedTurn | Straight]", list(models))
+    if len({float(m.T) for m in turns}) != 1 or any(np.shape(m.Q_sqrt) != (5, 3) for m in turns):
+        return None
+    return ModesPropagator(
+        T=float(turns[0].T),
+        small=float(CoordinatedTurn.SMALL),
+        Ls=f64(np.stack([m.Q_sqrt for m in turns])),
+        keep=np.array([1.0 if isinstance(m, CoordinatedTurn) else 0.0 for m in turns]),
+        N=N,
+    )
 
 
 # ---- sensors ----------------------------------------------------------------------------------

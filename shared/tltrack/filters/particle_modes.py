@@ -4,9 +4,11 @@ The jump-Markov multiple-model particle filter: a particle is a state and a moti
 mode follows the modes' Markov chain from one step to the next, and the state moves as its mode
 says (:class:`~tltrack.models.modes.MotionModes`). :class:`ParticleModes` keeps the modes (B, N),
 draws their transitions from a child of each run's random stream (so the run's own stream, and
-with it the propagation's noise, is that of the single-model filter), and propagates a cloud mode
-by mode: the particles of a mode through that mode's compiled kernel when it has one and holds
-every particle of the run, else through its f and Q_sqrt in NumPy.
+with it the propagation's noise, is that of the single-model filter), and propagates a cloud: a
+run whose particles share one mode through that mode's compiled kernel (so one mode is the
+single-model filter bit for bit), a run of mixed modes through the compiled kernel of the modes
+(:func:`~tltrack.filters.fastpath.modes_propagator`) when they have one, else mode by mode
+through each mode's f and Q_sqrt in NumPy.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ class ParticleModes:
         #: (B, N): each particle's mode
         self.of = np.stack([np.searchsorted(first, g.random(N), side="right") for g in self.rngs])
         self._propagators = [fastpath.propagator(m, N) for m in modes.models]
+        self._mixed = fastpath.modes_propagator(modes.models, N)
         self._L = [fastpath.f64(m.Q_sqrt) for m in modes.models]
 
     def switch(self, previous: Modes) -> Modes:
@@ -60,11 +63,15 @@ class ParticleModes:
         out = np.empty_like(x)
         fast = x.dtype == np.float64 and x.flags.c_contiguous
         for b in range(x.shape[1]):
-            only = np.unique(modes[b])
-            kernel = self._propagators[int(only[0])] if len(only) == 1 and fast else None
+            kernel = self._propagators[int(modes[b, 0])] if _one_mode(modes[b]) and fast else None
             if kernel is not None:
                 run = np.empty((x.shape[0], 1, x.shape[2]))
                 kernel.mean(np.ascontiguousarray(x[:, b : b + 1]), run)
+                out[:, b] = run[:, 0]
+                continue
+            if self._mixed is not None and fast:
+                run = np.empty((x.shape[0], 1, x.shape[2]))
+                self._mixed.mean(np.ascontiguousarray(x[:, b : b + 1]), modes[b : b + 1], run)
                 out[:, b] = run[:, 0]
                 continue
             for j, model in enumerate(self.modes.models):
@@ -86,11 +93,14 @@ class ParticleModes:
         n, B = src.shape[0], src.shape[1]
         out = np.empty((n, B, self.N))
         slow = []
+        fast = src.dtype == np.float64 and src.flags.c_contiguous
+        modes = np.ascontiguousarray(modes, dtype=np.int64)
         for b in range(B):
-            only = np.unique(modes[b])
-            kernel = self._propagators[int(only[0])] if len(only) == 1 else None
-            if kernel is not None and src.dtype == np.float64 and src.flags.c_contiguous:
+            kernel = self._propagators[int(modes[b, 0])] if _one_mode(modes[b]) else None
+            if kernel is not None and fast:
                 kernel(src, anc, U[b : b + 1], out, b)  # the whole run in one mode's kernel
+            elif self._mixed is not None and fast:
+                self._mixed(src, anc, modes, U[b : b + 1], out, b)
             else:
                 slow.append(b)
         if slow:
@@ -102,3 +112,7 @@ class ParticleModes:
                     if sel.any():
                         out[:, b, sel] = model.f(x[:, sel]) + self._L[j] @ E[:, b, sel]
         return out
+
+
+def _one_mode(run: Modes) -> bool:
+    return bool((run == run[0]).all())

@@ -6,10 +6,13 @@ import numpy as np
 
 from tltrack.filters import fastpath
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
+from tltrack.filters.kernels.gaussians import uniforms_per_run
 from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.particle import ParticleFilter
 from tltrack.filters.recovery import Recovery
 from tltrack.filters.resampling import systematic_indices
+from tltrack.models.coordinated_turn import CoordinatedTurn
+from tltrack.models.modes import Straight
 from tltrack.models.observation import Observation
 
 
@@ -34,5 +37,19 @@ def warm_up() -> None:
             pf.estimate()
             _ = pf.x
             pf.gaussians()
+    _warm_modes()
     systematic_indices(np.full((1, 4), 0.25), rngs)
     spread_coordinates(np.eye(5)[None], 1e-10)  # the Monte-Carlo engine's NEES
+
+
+def _warm_modes() -> None:
+    """The jump-Markov coordinated turn's kernels (particles of mixed modes)."""
+    N = 8
+    mixed = fastpath.modes_propagator([Straight(1.0, 1.0), CoordinatedTurn(1.0, 1.0, 1e-4)], N)
+    assert mixed is not None
+    x = np.full((5, 1, N), 1000.0)
+    modes = (np.arange(N) % 2)[None].astype(np.int64)
+    anc = np.zeros((1, N + 1), dtype=np.int64)
+    out = np.empty_like(x)
+    mixed(x, anc, modes, np.full((1, uniforms_per_run(3, N)), 0.5), out, 0)
+    mixed.mean(x, modes, out)

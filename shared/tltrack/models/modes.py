@@ -5,8 +5,9 @@ transition matrix Pi (row i: the probabilities of going from mode i to each mode
 mode the state moves as that mode's model says. Every mode lives in one common state, the
 coordinated turn's (x, vx, y, vy, Omega): a straight (constant-velocity) mode holds Omega at 0
 (:class:`Straight`), a turning mode is a
-:class:`~tltrack.models.coordinated_turn.CoordinatedTurn` with its own noise. The interacting multiple-model filter (Blom & Bar-Shalom
-1988) and the particle filters with a mode per particle follow the chain (tltrack.filters).
+:class:`~tltrack.models.coordinated_turn.CoordinatedTurn` with its own noise. The interacting
+multiple-model filter (Blom & Bar-Shalom 1988) and the particle filters with a mode per particle
+follow the chain (tltrack.filters).
 """
 
 from __future__ import annotations

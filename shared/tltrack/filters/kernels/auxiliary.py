@@ -54,25 +54,46 @@ def _ct_mean_row(
 
 
 @njit(**FMA)
+def _ct_mean_run(
+    x: np.ndarray, b: int, w: np.ndarray, T: float, small: float, m: np.ndarray
+) -> None:
+    """m[:, b] = f_CT of run b's particles, turning at the rates w (N,)."""
+    big = _ct_mean_row(
+        x[0, b], x[1, b], x[2, b], x[3, b], w, T, small,
+        m[0, b], m[1, b], m[2, b], m[3, b], m[4, b],
+    )  # fmt: skip
+    if big:  # turn arguments beyond the fast sin/cos (huge or not finite): libm
+        for i in range(x.shape[2]):
+            om = w[i]
+            wT = om * T
+            if not (abs(wT) <= TRIG_MAX):
+                s, c = math.sin(wT), math.cos(wT)
+                a, bb = s / om, (1.0 - c) / om
+                px, vx, py, vy = x[0, b, i], x[1, b, i], x[2, b, i], x[3, b, i]
+                m[0, b, i] = px + a * vx - bb * vy
+                m[1, b, i] = c * vx - s * vy
+                m[2, b, i] = py + bb * vx + a * vy
+                m[3, b, i] = s * vx + c * vy
+
+
+@njit(**FMA)
 def ct_mean(x: np.ndarray, T: float, small: float, m: np.ndarray) -> None:
     """m = f_CT(x) for clouds (5, B, N): the transition's mean, for the look-ahead."""
     for b in range(x.shape[1]):
-        big = _ct_mean_row(
-            x[0, b], x[1, b], x[2, b], x[3, b], x[4, b], T, small,
-            m[0, b], m[1, b], m[2, b], m[3, b], m[4, b],
-        )  # fmt: skip
-        if big:  # turn arguments beyond the fast sin/cos (huge or not finite): libm
-            for i in range(x.shape[2]):
-                om = x[4, b, i]
-                wT = om * T
-                if not (abs(wT) <= TRIG_MAX):
-                    s, c = math.sin(wT), math.cos(wT)
-                    a, bb = s / om, (1.0 - c) / om
-                    px, vx, py, vy = x[0, b, i], x[1, b, i], x[2, b, i], x[3, b, i]
-                    m[0, b, i] = px + a * vx - bb * vy
-                    m[1, b, i] = c * vx - s * vy
-                    m[2, b, i] = py + bb * vx + a * vy
-                    m[3, b, i] = s * vx + c * vy
+        _ct_mean_run(x, b, x[4, b], T, small, m)
+
+
+@njit(**FMA)
+def modes_ct_mean(
+    x: np.ndarray, mode: np.ndarray, keep: np.ndarray, T: float, small: float, m: np.ndarray
+) -> None:
+    """m = f_m(x) for clouds (5, B, N) whose particle i of run b is in mode[b, i]: the coordinated
+    turn at keep[mode] Omega (0: straight, Omega held at 0)."""
+    w = np.empty(x.shape[2])
+    for b in range(x.shape[1]):
+        for i in range(x.shape[2]):
+            w[i] = x[4, b, i] * keep[mode[b, i]]
+        _ct_mean_run(x, b, w, T, small, m)
 
 
 @njit(**FMA)

@@ -1,5 +1,6 @@
 """Propagation x_k = f(x_{k-1}^(anc)) + L eps of the coordinated-turn and constant-velocity
-models, fused with the gather of the resampled ancestors, block by block."""
+models, and of the coordinated turn's jump-Markov modes, fused with the gather of the resampled
+ancestors, block by block."""
 
 from __future__ import annotations
 
@@ -20,13 +21,17 @@ def _ct_fixup(
     b: int,
     T: float,
     small: float,
-    L: np.ndarray,
+    Ls: np.ndarray,
+    mode: np.ndarray,
+    keep: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """Redo, with libm's sin/cos, the particles whose turn argument the fast reduction refused."""
+    """Redo, with libm's sin/cos, the particles whose turn argument the fast reduction refused;
+    particle i moves in mode mode[i] (noise factor Ls[m], turn rate scaled by keep[m])."""
     for i in range(out.shape[2]):
         j = anc[b, i]
-        w = x[4, b, j]
+        m = mode[i]
+        w = x[4, b, j] * keep[m]
         wT = w * T
         if not (abs(wT) <= TRIG_MAX):
             s = math.sin(wT)
@@ -36,6 +41,7 @@ def _ct_fixup(
             bb = T * (wT / 2.0) if tiny else (1.0 - c) * (1.0 / w)
             px, vx, py, vy = x[0, b, j], x[1, b, j], x[2, b, j], x[3, b, j]
             f = (px + a * vx - bb * vy, c * vx - s * vy, py + bb * vx + a * vy, s * vx + c * vy, w)
+            L = Ls[m]
             for k in range(5):
                 out[k, b, i] = f[k] + (L[k, 0] * e[0, i] + L[k, 1] * e[1, i] + L[k, 2] * e[2, i])
 
@@ -158,7 +164,106 @@ def ct_predict(
             )
         if big:  # turn arguments beyond the fast sin/cos (huge or not finite): redo with libm
             gaussian_rows(u, e)
-            _ct_fixup(x, anc, e, b, T, small, L, out)
+            _ct_fixup(x, anc, e, b, T, small, L.reshape((1, 5, 3)), np.zeros(N, np.int64),
+                      np.ones(1), out)  # fmt: skip
+
+
+@njit(**FMA)
+def _modes_block(
+    ur: np.ndarray,
+    ua: np.ndarray,
+    e2: np.ndarray,
+    g: np.ndarray,
+    mode: np.ndarray,
+    keep: np.ndarray,
+    Ls: np.ndarray,
+    T: float,
+    small: float,
+    o0: np.ndarray,
+    o1: np.ndarray,
+    o2: np.ndarray,
+    o3: np.ndarray,
+    o4: np.ndarray,
+) -> int:
+    """:func:`_ct_block` with a mode per particle: particle t turns at keep[m] Omega (0 in a
+    straight mode, which so moves as constant velocity and holds Omega at 0) and takes the
+    noise factor Ls[m], m = mode[t]."""
+    big = 0
+    for t in range(ur.shape[0]):
+        m = mode[t]
+        rad = math.sqrt(-2.0 * log(1.0 - ur[t]))
+        sa, ca = sincos_2pi(ua[t])
+        z0 = rad * ca
+        z1 = rad * sa
+        z2 = e2[t]
+        px = g[0, t]
+        vx = g[1, t]
+        py = g[2, t]
+        vy = g[3, t]
+        w = g[4, t] * keep[m]
+        wT = w * T
+        s, c = sincos(wT)
+        big += not (abs(wT) <= TRIG_MAX)
+        tiny = abs(wT) < small
+        inv = 1.0 / w
+        a = T * (1.0 - wT * wT / 6.0) if tiny else s * inv
+        bb = T * (wT / 2.0) if tiny else (1.0 - c) * inv
+        o0[t] = px + a * vx - bb * vy + (Ls[m, 0, 0] * z0 + Ls[m, 0, 1] * z1 + Ls[m, 0, 2] * z2)
+        o1[t] = c * vx - s * vy + (Ls[m, 1, 0] * z0 + Ls[m, 1, 1] * z1 + Ls[m, 1, 2] * z2)
+        o2[t] = py + bb * vx + a * vy + (Ls[m, 2, 0] * z0 + Ls[m, 2, 1] * z1 + Ls[m, 2, 2] * z2)
+        o3[t] = s * vx + c * vy + (Ls[m, 3, 0] * z0 + Ls[m, 3, 1] * z1 + Ls[m, 3, 2] * z2)
+        o4[t] = w + (Ls[m, 4, 0] * z0 + Ls[m, 4, 1] * z1 + Ls[m, 4, 2] * z2)
+    return big
+
+
+@njit(**FMA)
+def modes_ct_predict(
+    x: np.ndarray,
+    anc: np.ndarray,
+    U: np.ndarray,
+    e: np.ndarray,
+    g: np.ndarray,
+    mode: np.ndarray,
+    keep: np.ndarray,
+    Ls: np.ndarray,
+    T: float,
+    small: float,
+    out: np.ndarray,
+    b0: int,
+) -> None:
+    """:func:`ct_predict` for the jump-Markov coordinated turn: new particle i of run b moves in
+    mode mode[b, i] (M modes: noise factors Ls (M, 5, 3), turn-rate factors keep (M,)), with the
+    same Gaussians from U as the single-model kernel."""
+    N = out.shape[2]
+    e2 = e[2]
+    for r in range(U.shape[0]):
+        b = b0 + r
+        u = U[r]
+        bm_row(u[2 * N :], e2)
+        big = 0
+        for i0 in range(0, N, BLOCK):
+            m = min(BLOCK, N - i0)
+            _gather_block(x, anc, b, i0, m, g)
+            j = i0 + m
+            big += _modes_block(
+                u[i0:j],
+                u[N + i0 : N + j],
+                e2[i0:j],
+                g,
+                mode[b, i0:j],
+                keep,
+                Ls,
+                T,
+                small,
+                out[0, b, i0:j],
+                out[1, b, i0:j],
+                out[2, b, i0:j],
+                out[3, b, i0:j],
+                out[4, b, i0:j],
+            )
+        if big:
+            gaussian_rows(u, e)
+            _ct_fixup(x, anc, e, b, T, small, Ls, mode[b], keep, out)
 
 
 @njit(**FMA)

@@ -143,8 +143,9 @@ def rb_update(
     ok: np.ndarray,
     row: np.ndarray,
 ) -> int:
-    """:func:`rb_loglik` then :func:`~tltrack.filters.kernels.resample.resample`, run by run, so that a run's log-weights (row, (N,)
-    scratch) stay in cache between the two. Same arguments and results as those two."""
+    """:func:`rb_loglik` then :func:`~tltrack.filters.kernels.resample.resample`, run by run,
+    so that a run's log-weights (row, (N,) scratch) stay in cache between the two. Same
+    arguments and results as those two."""
     cs = np.empty((pos.shape[0], _NC))
     cnt = np.empty(x.shape[2])
     good = 0

@@ -95,7 +95,8 @@ def resample(
     """Normalise exp(logw) per run and resample systematically with offset u[b]: the ancestors go
     to anc (B, N + 1; the last column is scratch), and the resampled cloud's mean (B, n) and
     covariance (B, n, n) to mean and cov. The cloud itself is not gathered here (the next predict
-    reads through anc; :func:`~tltrack.filters.kernels.propagation.gather` makes it on request). ``logw`` is overwritten.
+    reads through anc; :func:`~tltrack.filters.kernels.propagation.gather` makes it on request).
+    ``logw`` is overwritten.
 
     ok[b] is False, and anc[b], mean[b], cov[b] meaningless, for a run whose weights are not finite
     (a NaN log-weight, or all -inf). Returns the count of runs that are ok.
