@@ -28,7 +28,7 @@ def test_the_first_live_demo_scores_every_step_with_the_transfer(tmp_path: Path)
     summary = tutorial("live_demo").main(tmp_path, steps=steps, particles=500)
     assert summary["access_control"] is True and summary["topology"] == "federated"
     filters = summary["filters"]
-    assert {"rpf", "tl-rpf", "source-rpf/s1"} <= set(filters), filters.keys()
+    assert {"rpf", "tl-rpf", "source-rpf"} <= set(filters), filters.keys()
     for name, f in filters.items():
         assert f["steps"] == steps and f["rmse_overall"] is not None, (name, f)
     assert filters["tl-rpf"]["steps_with_transfer"] >= steps - 2  # none at k = 1
