@@ -212,7 +212,10 @@ def _nested_constraints(annotation: Any) -> list[str]:
         for a in args:
             if not isinstance(a, str | int | float):
                 inner = _nested_constraints(a)
-                out += [f"each {c}" if origin in (list, tuple) else c for c in inner]
+                out += [
+                    f"each {c}" if origin in (list, tuple) and not c.startswith("each") else c
+                    for c in inner
+                ]
     return list(dict.fromkeys(out))
 
 
@@ -574,34 +577,41 @@ class AclDirective(_RstDirective):
                     identities.setdefault(who, []).extend(rules[r] for r in policy["rules"])
         rows = []
         for who, granted in identities.items():
-            everyone = "``tltrack/scorer/summary``"
-            reads = [k for k in _keys_of(granted, "allow", "egress", "put")]
+            reads = _keys_of(granted, "allow", "egress", "put")
             pubs = _keys_of(granted, "allow", "ingress", "put")
-            denied = _keys_of(granted, "deny", "egress", "put") + _keys_of(
-                granted, "deny", "ingress", "put"
-            )
             rows.append(
                 [
                     f"``{who}``",
-                    ", ".join(f"``{k}``" for k in reads) or "(only " + everyone + ")",
+                    ", ".join(f"``{k}``" for k in reads) or "no data key",
                     ", ".join(f"``{k}``" for k in pubs) or "nothing",
-                    ", ".join(f"``{k}``" for k in dict.fromkeys(denied)) or "",
                 ]
+            )
+        denials = []
+        for rule in acl["rules"]:
+            if rule["permission"] != "deny":
+                continue
+            whom = sorted(
+                {w for w, granted in identities.items() if any(r is rule for r in granted)}
+            )
+            keys_ = ", ".join(f"``{k}``" for k in rule["key_exprs"])
+            what = ", ".join(rule["messages"])
+            denials.append(
+                f"- ``{rule['id']}`` ({', '.join(f'``{w}``' for w in whom)}): {what} on {keys_}"
             )
         default = acl.get("default_permission", "?")
         return [
-            f"Default permission: ``{default}``. Generated from ``{self.arguments[0]}``:",
+            f"Default permission: ``{default}``. Generated from ``{self.arguments[0]}``; anyone "
+            "may also query the scorer's summary.",
             "",
             *list_table(
-                (
-                    "identity",
-                    "receives (egress put)",
-                    "may publish (ingress put)",
-                    "denied outright",
-                ),
+                ("identity", "receives (egress put)", "may publish (ingress put)"),
                 rows,
-                "12 36 30 22",
+                "14 46 40",
             ),
+            "Denied outright, whatever a broader rule might allow:",
+            "",
+            *denials,
+            "",
         ]
 
 
@@ -963,6 +973,28 @@ def click_text(app: Sphinx, ctx: Any, lines: list[str]) -> None:
     lines[:] = [_markdown_as_rst(line) for line in lines]
 
 
+#: what marks a page whose content comes from the code, not from its own source
+_GENERATED = re.compile(r"\.\. (tltrack-[a-z]+|click)::|\{eval-rst\}\s*\n\.\. tltrack-")
+
+
+def reread_generated(
+    app: Sphinx, env: Any, added: set[str], changed: set[str], removed: set[str]
+) -> list[str]:
+    """Pages made by this extension's directives (and sphinx-click's) are read again at every
+    build: their source does not change when the code they describe does."""
+    again = []
+    for docname in env.found_docs:
+        if docname in added or docname in changed:
+            continue
+        try:
+            source = Path(env.doc2path(docname)).read_text()
+        except OSError:
+            continue
+        if _GENERATED.search(source):
+            again.append(docname)
+    return again
+
+
 def setup(app: Sphinx) -> dict[str, Any]:
     import sphinx_click.ext
 
@@ -983,4 +1015,5 @@ def setup(app: Sphinx) -> dict[str, Any]:
     for what in ("description", "options", "arguments", "epilog"):
         app.connect(f"sphinx-click-process-{what}", click_text)
     app.connect("source-read", adjust_sources)
+    app.connect("env-get-outdated", reread_generated)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
