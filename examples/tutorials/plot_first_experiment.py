@@ -73,7 +73,7 @@ for name in ("rpf", "tl-rpf", "source-rpf"):
 ax.plot(k, doc["pcrlb"]["primary"], "k--", lw=1, label="PCRLB, primary alone")
 ax.plot(k, doc["pcrlb"]["with_source"], "k:", lw=1, label="PCRLB, with the source's data")
 ax.set(xlabel="step k", ylabel="position RMSE [m]", yscale="log", title="Scenario 2, I_p = 4")
-ax.legend()
+ax.legend(fontsize="small", ncols=2, loc="upper center", bbox_to_anchor=(0.5, -0.15))
 fig.tight_layout()
 
 # %%
