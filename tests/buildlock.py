@@ -1,10 +1,9 @@
-"""One builder at a time in build/: the Docker image (tests/test_compose.py, reused by
-tests/test_dask.py) and the wheel (tests/test_wheel.py) both run scripts/build_wheels.sh into
-build/wheels, which removes and rewrites build/wheels/app (and deps/ when the pins change).
+"""One image build at a time: tests/test_compose.py's ``image`` fixture, which tests/test_dask.py
+reuses, runs scripts/build_image.sh (its wheels into build/wheels, then docker build).
 
-Under pytest-xdist several test processes may reach those fixtures at once; an exclusive
-``flock`` on build/.build.lock makes the second wait for the first, and then reuse what it built
-(the image's stamp says whether the image is current)."""
+Under pytest-xdist both test processes may reach that fixture at once; an exclusive ``flock`` on
+build/.build.lock makes the second wait for the first's build, and then reuse it (the image's
+stamp says whether the image is current). tests/test_wheel.py builds into its own folder."""
 
 from __future__ import annotations
 

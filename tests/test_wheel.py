@@ -1,25 +1,25 @@
 """The package as a user gets it: sdist and wheel by ``python -m build``, the wheel installed into a
-fresh venv outside the clone (dependencies from the local wheelhouse of scripts/build_wheels.sh,
-built once), and ``tltrack demo`` run from an unrelated directory, with access control on."""
+fresh venv outside the clone (dependencies from the wheelhouse scripts/build_wheels.sh makes), and
+``tltrack demo`` run from an unrelated directory, with access control on.
+
+The wheels go to the test's own folder, not build/wheels: the image's build (tests/test_compose.py)
+rewrites that one, maybe at the same moment in the other test process, and waiting for it left
+this one idle for minutes (the wheelhouse takes 20 s from pip's local wheels)."""
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
-import buildlock
 import pytest
 
 # one test process runs the module: one wheel build and one venv
 pytestmark = [pytest.mark.system, pytest.mark.xdist_group("wheel")]
 
 ROOT = Path(__file__).resolve().parents[1]
-WHEELS = ROOT / "build" / "wheels"
-FROM_WHEELHOUSE = ["--find-links", str(WHEELS / "deps")]
 
 
 def run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProcess[str]:
@@ -31,20 +31,16 @@ def run(argv: list[str], cwd: Path, timeout: float) -> subprocess.CompletedProce
 def venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh venv with only the wheel (and its pinned dependencies) installed."""
     where = tmp_path_factory.mktemp("fresh")
-    # the image's build (tests/test_compose.py) writes build/wheels too, maybe at this moment
-    with buildlock.held("the wheel"):
-        build = run(
-            ["bash", str(ROOT / "scripts" / "build_wheels.sh"), str(WHEELS)],
-            ROOT,
-            timeout=900,
-        )
-        assert build.returncode == 0, build.stderr
-        made = sorted(p.name for p in (WHEELS / "app").iterdir())
-        assert len(made) == 2 and made[0].endswith(".whl") and made[1].endswith(".tar.gz"), made
-        wheel = shutil.copy(WHEELS / "app" / made[0], where)  # (app/ is rebuilt by each build)
+    wheels = where / "wheels"
+    build = run(["bash", str(ROOT / "scripts" / "build_wheels.sh"), str(wheels)], ROOT, timeout=900)
+    assert build.returncode == 0, build.stderr
+    made = sorted(p.name for p in (wheels / "app").iterdir())
+    assert len(made) == 2 and made[0].endswith(".whl") and made[1].endswith(".tar.gz"), made
     subprocess.run([sys.executable, "-m", "venv", str(where / "venv")], check=True)
     pip = str(where / "venv" / "bin" / "pip")
-    install = run([pip, "install", "--no-index", "-q", *FROM_WHEELHOUSE, wheel], where, 600)
+    wheel = str(wheels / "app" / made[0])
+    from_wheelhouse = ["--find-links", str(wheels / "deps")]
+    install = run([pip, "install", "--no-index", "-q", *from_wheelhouse, wheel], where, 600)
     assert install.returncode == 0, install.stderr
     return where / "venv"
 
