@@ -117,12 +117,17 @@ class ModesPropagator:
     Ls: Array  # (M, 5, 3): each mode's Q_sqrt
     keep: Array  # (M,): 1 where the mode turns, 0 where it holds Omega at 0
     N: int
+    C: Array = field(init=False)  # (M, 5): Ls's entries that may be non-zero
     e: Array = field(init=False)
     g: Array = field(init=False)
+    c: Array = field(init=False)
 
     def __post_init__(self) -> None:
+        rows, cols = zip(*propagation.MODE_NOISE, strict=True)
+        self.C = f64(self.Ls[:, list(rows), list(cols)])
         self.e = np.empty((3, self.N))
         self.g = np.empty((5, propagation.BLOCK))
+        self.c = np.empty((5, propagation.BLOCK))
 
     def __call__(
         self, src: Array, anc: NDArray[np.int64], modes: NDArray[np.int64], U: Array, out: Array,
@@ -130,8 +135,9 @@ class ModesPropagator:
     ) -> None:  # fmt: skip
         """Propagate run b (its uniforms U (1, ...)), particle i in mode modes[b, i]."""
         propagation.modes_ct_predict(
-            src, anc, U, self.e, self.g, modes, self.keep, self.Ls, self.T, self.small, out, b
-        )
+            src, anc, U, self.e, self.g, self.c, modes, self.keep, self.C, self.Ls, self.T,
+            self.small, out, b,
+        )  # fmt: skip
 
     def mean(self, x: Array, modes: NDArray[np.int64], out: Array) -> None:
         """out = f_m(x), particle by particle in its mode, every run."""
@@ -140,16 +146,23 @@ class ModesPropagator:
 
 def modes_propagator(models: Sequence[MotionModel], N: int) -> ModesPropagator | None:
     """The compiled propagation of a cloud whose particles move in these modes, or None (the
-    generic path): every mode a coordinated turn or straight, of one period."""
+    generic path): every mode a coordinated turn or straight, of one period, whose noise factor
+    has no entry beyond :data:`~tltrack.filters.kernels.propagation.MODE_NOISE`."""
     if not all(type(m) in (CoordinatedTurn, Straight) for m in models):
         return None
     turns = cast("list[CoordinatedTurn | Straight]", list(models))
     if len({float(m.T) for m in turns}) != 1 or any(np.shape(m.Q_sqrt) != (5, 3) for m in turns):
         return None
+    Ls = f64(np.stack([m.Q_sqrt for m in turns]))
+    outside = Ls.copy()
+    for i, j in propagation.MODE_NOISE:
+        outside[:, i, j] = 0.0
+    if np.any(outside != 0.0):
+        return None
     return ModesPropagator(
         T=float(turns[0].T),
         small=float(CoordinatedTurn.SMALL),
-        Ls=f64(np.stack([m.Q_sqrt for m in turns])),
+        Ls=Ls,
         keep=np.array([1.0 if isinstance(m, CoordinatedTurn) else 0.0 for m in turns]),
         N=N,
     )

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.filters import fastpath
+from tltrack.filters.kernels import propagation
 from tltrack.models.modes import MotionModes
 
 Array = NDArray[np.float64]
@@ -39,16 +40,19 @@ class ParticleModes:
         self.of = np.stack([np.searchsorted(first, g.random(N), side="right") for g in self.rngs])
         self._propagators = [fastpath.propagator(m, N) for m in modes.models]
         self._mixed = fastpath.modes_propagator(modes.models, N)
+        self._u = np.empty((len(rngs), N))  # the switches' uniforms (scratch)
         self._L = [fastpath.f64(m.Q_sqrt) for m in modes.models]
 
     def switch(self, previous: Modes) -> Modes:
         """Each particle's next mode (B, N) given its mode ``previous`` (B, N): one uniform per
         particle from each run's mode stream, by the inverse CDF of its row of the chain."""
-        out = np.empty_like(previous)
         for b, g in enumerate(self.rngs):
-            u = g.random(self.N)
-            out[b] = (u[:, None] >= self._cdf[previous[b]]).sum(axis=1)
-        return np.minimum(out, self.modes.M - 1)
+            g.random(out=self._u[b])
+        out = np.empty(previous.shape, dtype=np.int64)
+        propagation.switch_modes(
+            self._u, np.ascontiguousarray(previous, dtype=np.int64), self._cdf, out
+        )
+        return out
 
     def probabilities(self, modes: Modes, weights: Array | None = None) -> Array:
         """(M, B): each mode's share of the cloud (weighted by ``weights`` (B, N) if given); a

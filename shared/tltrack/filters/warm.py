@@ -6,6 +6,7 @@ import numpy as np
 
 from tltrack.filters import fastpath
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
+from tltrack.filters.kernels import propagation
 from tltrack.filters.kernels.gaussians import uniforms_per_run
 from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.particle import ParticleFilter
@@ -53,3 +54,4 @@ def _warm_modes() -> None:
     out = np.empty_like(x)
     mixed(x, anc, modes, np.full((1, uniforms_per_run(3, N)), 0.5), out, 0)
     mixed.mean(x, modes, out)
+    propagation.switch_modes(np.full((1, N), 0.5), modes, np.ones((2, 2)), modes.copy())

@@ -168,15 +168,35 @@ def ct_predict(
                       np.ones(1), out)  # fmt: skip
 
 
+#: the noise factor's entries that a coordinated turn's (and a straight mode's) Q_sqrt (5, 3) may
+#: have non-zero: x and vx from the first Gaussian, y and vy from the second, Omega from the third
+MODE_NOISE = ((0, 0), (1, 0), (2, 1), (3, 1), (4, 2))
+
+
+@njit(**FMA)
+def _mode_rows(
+    mode: np.ndarray, keep: np.ndarray, C: np.ndarray, g: np.ndarray, c: np.ndarray
+) -> None:
+    """Per particle t of the block: its turn rate g[4, t] scaled by keep[m] and its noise
+    coefficients c[:, t] = C[m] (m = mode[t]), so that the propagation's loop reads unit-stride
+    rows and vectorises (a per-particle lookup inside it would not)."""
+    for t in range(mode.shape[0]):
+        m = mode[t]
+        g[4, t] *= keep[m]
+        c[0, t] = C[m, 0]
+        c[1, t] = C[m, 1]
+        c[2, t] = C[m, 2]
+        c[3, t] = C[m, 3]
+        c[4, t] = C[m, 4]
+
+
 @njit(**FMA)
 def _modes_block(
     ur: np.ndarray,
     ua: np.ndarray,
     e2: np.ndarray,
     g: np.ndarray,
-    mode: np.ndarray,
-    keep: np.ndarray,
-    Ls: np.ndarray,
+    c: np.ndarray,
     T: float,
     small: float,
     o0: np.ndarray,
@@ -185,34 +205,31 @@ def _modes_block(
     o3: np.ndarray,
     o4: np.ndarray,
 ) -> int:
-    """:func:`_ct_block` with a mode per particle: particle t turns at keep[m] Omega (0 in a
-    straight mode, which so moves as constant velocity and holds Omega at 0) and takes the
-    noise factor Ls[m], m = mode[t]."""
+    """:func:`_ct_block` with each particle's own noise coefficients c (5, m) (the entries
+    :data:`MODE_NOISE` of its mode's Q_sqrt) and its turn rate already scaled by its mode."""
     big = 0
     for t in range(ur.shape[0]):
-        m = mode[t]
         rad = math.sqrt(-2.0 * log(1.0 - ur[t]))
         sa, ca = sincos_2pi(ua[t])
         z0 = rad * ca
         z1 = rad * sa
-        z2 = e2[t]
         px = g[0, t]
         vx = g[1, t]
         py = g[2, t]
         vy = g[3, t]
-        w = g[4, t] * keep[m]
+        w = g[4, t]
         wT = w * T
-        s, c = sincos(wT)
+        s, co = sincos(wT)
         big += not (abs(wT) <= TRIG_MAX)
         tiny = abs(wT) < small
         inv = 1.0 / w
         a = T * (1.0 - wT * wT / 6.0) if tiny else s * inv
-        bb = T * (wT / 2.0) if tiny else (1.0 - c) * inv
-        o0[t] = px + a * vx - bb * vy + (Ls[m, 0, 0] * z0 + Ls[m, 0, 1] * z1 + Ls[m, 0, 2] * z2)
-        o1[t] = c * vx - s * vy + (Ls[m, 1, 0] * z0 + Ls[m, 1, 1] * z1 + Ls[m, 1, 2] * z2)
-        o2[t] = py + bb * vx + a * vy + (Ls[m, 2, 0] * z0 + Ls[m, 2, 1] * z1 + Ls[m, 2, 2] * z2)
-        o3[t] = s * vx + c * vy + (Ls[m, 3, 0] * z0 + Ls[m, 3, 1] * z1 + Ls[m, 3, 2] * z2)
-        o4[t] = w + (Ls[m, 4, 0] * z0 + Ls[m, 4, 1] * z1 + Ls[m, 4, 2] * z2)
+        bb = T * (wT / 2.0) if tiny else (1.0 - co) * inv
+        o0[t] = px + a * vx - bb * vy + c[0, t] * z0
+        o1[t] = co * vx - s * vy + c[1, t] * z0
+        o2[t] = py + bb * vx + a * vy + c[2, t] * z1
+        o3[t] = s * vx + co * vy + c[3, t] * z1
+        o4[t] = w + c[4, t] * e2[t]
     return big
 
 
@@ -223,8 +240,10 @@ def modes_ct_predict(
     U: np.ndarray,
     e: np.ndarray,
     g: np.ndarray,
+    c: np.ndarray,
     mode: np.ndarray,
     keep: np.ndarray,
+    C: np.ndarray,
     Ls: np.ndarray,
     T: float,
     small: float,
@@ -232,8 +251,9 @@ def modes_ct_predict(
     b0: int,
 ) -> None:
     """:func:`ct_predict` for the jump-Markov coordinated turn: new particle i of run b moves in
-    mode mode[b, i] (M modes: noise factors Ls (M, 5, 3), turn-rate factors keep (M,)), with the
-    same Gaussians from U as the single-model kernel."""
+    mode mode[b, i] of M (turn-rate factors keep (M,); noise factors Ls (M, 5, 3), whose only
+    non-zero entries, :data:`MODE_NOISE`, are C (M, 5)), with the single-model kernel's
+    Gaussians from U; c (5, BLOCK) is scratch."""
     N = out.shape[2]
     e2 = e[2]
     for r in range(U.shape[0]):
@@ -243,16 +263,15 @@ def modes_ct_predict(
         big = 0
         for i0 in range(0, N, BLOCK):
             m = min(BLOCK, N - i0)
-            _gather_block(x, anc, b, i0, m, g)
             j = i0 + m
+            _gather_block(x, anc, b, i0, m, g)
+            _mode_rows(mode[b, i0:j], keep, C, g, c)
             big += _modes_block(
                 u[i0:j],
                 u[N + i0 : N + j],
                 e2[i0:j],
                 g,
-                mode[b, i0:j],
-                keep,
-                Ls,
+                c,
                 T,
                 small,
                 out[0, b, i0:j],
@@ -264,6 +283,20 @@ def modes_ct_predict(
         if big:
             gaussian_rows(u, e)
             _ct_fixup(x, anc, e, b, T, small, Ls, mode[b], keep, out)
+
+
+@njit(**FMA)
+def switch_modes(u: np.ndarray, previous: np.ndarray, cdf: np.ndarray, out: np.ndarray) -> None:
+    """out[b, i]: the mode after previous[b, i], by the inverse CDF (cdf (M, M), rows' cumulative
+    sums, the last 1) of the chain's row at the uniform u[b, i]."""
+    M = cdf.shape[1]
+    for b in range(u.shape[0]):
+        for i in range(u.shape[1]):
+            row = previous[b, i]
+            m = 0
+            for j in range(M - 1):  # branch-free: the count of the row's sums at or below u
+                m += u[b, i] >= cdf[row, j]
+            out[b, i] = m
 
 
 @njit(**FMA)
