@@ -57,3 +57,25 @@ def test_the_cli_writes_a_config_that_loads(tmp_path: Path) -> None:
     bad.write_text("t,x,y\n0,1,2\n")
     done = CliRunner().invoke(app, ["fit", "--truth-file", str(bad)])
     assert done.exit_code == 2 and "error" in done.output
+
+
+def test_a_fit_of_modes_writes_their_chain_at_the_filters_period(tmp_path: Path) -> None:
+    from tltrack.app.fit import config_text
+    from tltrack.config.target_classes import transition, uniform_rates
+    from tltrack.engine.fit import PARAMETERS, Fit
+
+    values = dict(
+        zip(PARAMETERS["manoeuvres"], [0.1, 5.0, 1e-5, 40.0, 1e-3, 0.02, 3.0], strict=True)
+    )
+    done = Fit("manoeuvres", values, {}, 0.0, 10, ["a.csv"])
+    (tmp_path / "m.toml").write_text(config_text(done, Ts=2.0))
+    cfg = load_config(tmp_path / "m.toml")
+    assert [(m.kind, m.q1, m.q2) for m in cfg.motion_modes or []] == [
+        ("cv", 0.1, 0.0),
+        ("ct", 5.0, 1e-5),
+        ("ct", 40.0, 1e-3),
+    ]
+    np.testing.assert_allclose(
+        cfg.mode_transition, transition(uniform_rates(3, 0.02), 2.0), atol=1e-6
+    )
+    assert cfg.Ts == 2.0

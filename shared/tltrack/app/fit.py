@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -20,7 +19,11 @@ def fit(
         list[Path], typer.Option(help="a recorded track (CSV t,x,y or t,lat,lon); repeatable")
     ],
     model: Annotated[
-        str, typer.Option(help="cv, ct, or modes (a straight and a turning mode)")
+        str,
+        typer.Option(
+            help="cv, ct, modes (a straight and a turning mode) or manoeuvres (those and a "
+            "manoeuvring mode)"
+        ),
     ] = "cv",
     out: Annotated[
         Path | None, typer.Option(help="write the fitted noise as a config file (TOML) here")
@@ -65,17 +68,21 @@ def fit(
 
 def config_text(result: Any, Ts: float) -> str:
     """A config (TOML) with the fitted noise: the scenario's q1 (and q2), or the modes and their
-    chain over one period Ts (a switch with probability (1 - exp(-2 lambda Ts)) / 2)."""
+    chain over one period Ts."""
+    from tltrack.config.target_classes import transition, uniform_rates
+    from tltrack.engine.fit import mode_specs
+
     v = result.values
     head = f"# tltrack fit --model {result.kind} on {', '.join(result.tracks)}\n"
     if result.kind == "cv":
         return head + f'scenario = "cv"\nq1 = {v["q1"]:.6g}\n'
     if result.kind == "ct":
         return head + f'scenario = "ct"\nq1 = {v["q1"]:.6g}\nq2 = {v["q2"]:.6g}\n'
-    s = 0.5 * (1.0 - math.exp(-2.0 * v["switch_rate"] * Ts))
-    return head + (
-        f'scenario = "ct"\nTs = {Ts:g}\n'
-        f"mode_transition = [[{1 - s:.6g}, {s:.6g}], [{s:.6g}, {1 - s:.6g}]]\n\n"
-        f'[[motion_modes]]\nkind = "cv"\nq1 = {v["q1_straight"]:.6g}\n\n'
-        f'[[motion_modes]]\nkind = "ct"\nq1 = {v["q1_turn"]:.6g}\nq2 = {v["q2_turn"]:.6g}\n'
-    )
+    specs = mode_specs(result.kind, v)
+    Pi = transition(uniform_rates(len(specs), v["switch_rate"]), Ts)
+    rows = ", ".join("[" + ", ".join(f"{p:.12g}" for p in row) + "]" for row in Pi)
+    text = head + f'scenario = "ct"\nTs = {Ts:g}\nmode_transition = [{rows}]\n'
+    for m in specs:
+        text += f'\n[[motion_modes]]\nkind = "{m["kind"]}"\nq1 = {m["q1"]:.6g}\n'
+        text += f"q2 = {m['q2']:.6g}\n" if "q2" in m else ""
+    return text

@@ -12,7 +12,10 @@ track at once.
 - ``ct``: q1 and q2 of the coordinated turn (an unscented filter);
 - ``modes``: a straight mode (q1) and a turning mode (q1, q2) with the rate lambda at which the
   target switches between them, so that over an interval dt the chain switches with probability
-  (1 - exp(-2 lambda dt)) / 2 (an interacting multiple-model filter of unscented filters).
+  (1 - exp(-2 lambda dt)) / 2 (an interacting multiple-model filter of unscented filters);
+- ``manoeuvres``: those two and a manoeuvring mode (a coordinated turn with its own, larger,
+  q1 and q2), each left at the rate lambda for either other alike (the chain exp(G dt):
+  :func:`~tltrack.config.target_classes.transition`).
 
 The 95% confidence interval of the cv fit is the likelihood ratio's: the values whose profile
 log-likelihood lies within chi2_1(0.95) / 2 of the maximum (Pawitan 2001, sec. 2.6), read off a
@@ -26,13 +29,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 from scipy.stats import chi2, norm
 
+from tltrack.config.target_classes import transition, uniform_rates
 from tltrack.filters.imm import InteractingMultipleModel
 from tltrack.filters.sigma_point import SigmaPointFilter, unscented
 from tltrack.models.base import Layout, MotionModel
@@ -43,13 +47,22 @@ from tltrack.models.observation import Observation
 from tltrack.models.position import Position
 
 Array = NDArray[np.float64]
-Kind = Literal["cv", "ct", "modes"]
+Kind = Literal["cv", "ct", "modes", "manoeuvres"]
 
 #: what each kind fits, in order (log-space for the optimiser); sigma is the reports' noise
 PARAMETERS: dict[str, tuple[str, ...]] = {
     "cv": ("q1", "sigma"),
     "ct": ("q1", "q2", "sigma"),
     "modes": ("q1_straight", "q1_turn", "q2_turn", "switch_rate", "sigma"),
+    "manoeuvres": (
+        "q1_straight",
+        "q1_turn",
+        "q2_turn",
+        "q1_manoeuvre",
+        "q2_manoeuvre",
+        "switch_rate",
+        "sigma",
+    ),
 }
 #: starting values (SI: m^2/s^4, rad^2/s^3, m, 1/s)
 START = {
@@ -59,6 +72,7 @@ START = {
     "q1_straight": 0.1,
     "q1_turn": 1.0,
     "q2_turn": 1e-4,
+    "q2_manoeuvre": 1e-3,
     "switch_rate": 0.01,
 }
 #: the prior spread of the turn rate when a filter starts (rad/s): 5 deg/s
@@ -138,32 +152,47 @@ def _cv_loglik(tracks: Sequence[Reports], q1: Array, sigma: Array) -> Array:
     return out
 
 
+def mode_specs(kind: Kind, p: dict[str, float]) -> list[dict[str, Any]]:
+    """The modes (``motion_modes`` entries) of a fit of ``modes`` or ``manoeuvres``."""
+    specs = [
+        {"kind": "cv", "q1": p["q1_straight"]},
+        {"kind": "ct", "q1": p["q1_turn"], "q2": p["q2_turn"]},
+    ]
+    if kind == "manoeuvres":
+        specs.append({"kind": "ct", "q1": p["q1_manoeuvre"], "q2": p["q2_manoeuvre"]})
+    return specs
+
+
 def _modes_of(kind: Kind, p: dict[str, float]) -> list[MotionModel]:
     if kind == "ct":
         return [CoordinatedTurn(T=1.0, q1=p["q1"], q2=p["q2"])]
     return [
-        Straight(T=1.0, q1=p["q1_straight"]),
-        CoordinatedTurn(T=1.0, q1=p["q1_turn"], q2=p["q2_turn"]),
+        Straight(T=1.0, q1=m["q1"]) if m["kind"] == "cv" else CoordinatedTurn(1.0, m["q1"], m["q2"])
+        for m in mode_specs(kind, p)
     ]
 
 
 def _sigma_loglik(tracks: Sequence[Reports], kind: Kind, p: dict[str, float]) -> float:
-    """The log-likelihood under CT or the two modes, through unscented filters (B = 1)."""
+    """The log-likelihood under CT or the modes, through unscented filters (B = 1)."""
     models = _modes_of(kind, p)
+    M = len(models)
+    rates = uniform_rates(M, p["switch_rate"]) if M > 1 else ((0.0,),)
+    periods: dict[float, list[MotionModel]] = {}
     total = 0.0
     for r in tracks:
         x0, P0 = _start(r, 5, CoordinatedTurn.layout, p["sigma"])
         filters = [SigmaPointFilter(m, unscented(5, 2.0), x0[:, None], P0) for m in models]
-        imm = InteractingMultipleModel(filters, np.eye(len(filters)), np.full(len(filters), 0.5))
+        imm = InteractingMultipleModel(filters, np.eye(M), np.full(M, 1.0 / M))
         sensor = Position(CoordinatedTurn.layout, sigma_pos=p["sigma"])
         R = sensor.R(1.0)
         for k in range(2, len(r.t)):
             dt = float(r.t[k] - r.t[k - 1])
-            for f, m in zip(filters, models, strict=True):
-                f.model = m.with_period(dt)
-            if kind == "modes":
-                s = 0.5 * (1.0 - math.exp(-2.0 * p["switch_rate"] * dt))
-                imm.Pi = np.array([[1.0 - s, s], [s, 1.0 - s]])
+            if dt not in periods:  # a track's reports come at a few periods: each made once
+                periods[dt] = [m.with_period(dt) for m in models]
+            for f, m in zip(filters, periods[dt], strict=True):
+                f.model = m
+            if M > 1:
+                imm.Pi = np.array(transition(rates, dt))
             imm.predict()
             imm.update([Observation.broadcast(sensor, r.xy[k], R)])
             total += float(imm.loglik[0])
@@ -257,6 +286,7 @@ def fit(tracks: Sequence[Reports], kind: Kind = "cv", start: dict[str, float] | 
         "q1": cv["q1"],
         "q1_straight": cv["q1"],
         "q1_turn": cv["q1"],
+        "q1_manoeuvre": 10.0 * cv["q1"],
         "sigma": cv["sigma"],
         **(start or {}),
     }

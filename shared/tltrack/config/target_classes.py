@@ -1,0 +1,68 @@
+"""Target classes (``target_class``): how a kind of target moves, as the filters' motion modes.
+
+A class sets the filters' ``motion_modes`` (their noise) and their Markov chain. The chain is given
+as switching rates (a generator G, 1/s, rows summing to 0), so that one class serves every
+sampling period: over a step of Ts the transition matrix is Pi = exp(G Ts). The truth keeps the
+scenario's model and the preset still sets the sensors; a ``motion_modes`` or ``mode_transition``
+given explicitly wins over the class's.
+
+The values and the tracks they were fitted on are in docs/manoeuvres.md, with the commands
+(``tltrack fit``).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from scipy.linalg import expm
+
+TargetClassName = Literal["ship", "aircraft"]
+
+
+@dataclass(frozen=True)
+class TargetClass:
+    """A class's modes, each ``{"kind", "q1"[, "q2"]}`` as in ``motion_modes``, and the rate
+    (1/s) at which the target leaves mode i for mode j (``rates[i][j]``, i != j); ``single``, the
+    q1 and q2 of one coordinated turn fitted to the same tracks (what the modes are measured
+    against)."""
+
+    name: str
+    modes: tuple[dict[str, Any], ...]
+    rates: tuple[tuple[float, ...], ...]
+    single: dict[str, float]
+
+    def fields(self, Ts: float) -> dict[str, Any]:
+        """The config fields the class fills: ``motion_modes`` and ``mode_transition``."""
+        return {
+            "motion_modes": [dict(m) for m in self.modes],
+            "mode_transition": transition(self.rates, Ts),
+        }
+
+
+def transition(rates: Sequence[Sequence[float]], dt: float) -> list[list[float]]:
+    """Pi = exp(G dt), G the generator of the switching ``rates`` (1/s; rates[i][j], the rate
+    from mode i to mode j; the diagonal is ignored): the chain over dt seconds."""
+    return [list(r) for r in _transition(tuple(tuple(float(x) for x in r) for r in rates), dt)]
+
+
+@functools.lru_cache(maxsize=4096)
+def _transition(rates: tuple[tuple[float, ...], ...], dt: float) -> tuple[tuple[float, ...], ...]:
+    # cached: a fit asks for the same few periods at every report of every likelihood evaluation
+    G = np.array(rates)
+    np.fill_diagonal(G, 0.0)
+    G -= np.diag(G.sum(axis=1))
+    Pi = np.clip(expm(G * dt), 0.0, None)
+    return tuple(map(tuple, (Pi / Pi.sum(axis=1, keepdims=True)).tolist()))
+
+
+def uniform_rates(M: int, rate: float) -> tuple[tuple[float, ...], ...]:
+    """A chain that leaves each of M modes at ``rate`` (1/s), for any other mode alike."""
+    return tuple(tuple(0.0 if i == j else rate / (M - 1) for j in range(M)) for i in range(M))
+
+
+#: every class, by name (values: docs/manoeuvres.md)
+TARGET_CLASSES: dict[str, TargetClass] = {}
