@@ -2,7 +2,10 @@
 
 One build (``sphinx-build -W --keep-going``, as ``make docs`` runs it, with the gallery's tutorials
 run again) into a temporary folder, with every proxy pointing nowhere so that any network request
-fails the build; then checks on the HTML it wrote.
+fails the build; then checks on the HTML it wrote (the system tier).
+
+And, without a build (the unit tier), a page written by hand that must follow the code: every
+pinned dependency on the contributing page.
 """
 
 from __future__ import annotations
@@ -13,11 +16,21 @@ import re
 import subprocess
 import sys
 import time
+import tomllib
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import pytest
 
-pytestmark = [pytest.mark.system, pytest.mark.timeout(900)]
+T = TypeVar("T", bound=Callable[..., Any])
+
+
+def on_the_built_site(test: T) -> T:
+    """A check of the built site: the system tier, with time for the build."""
+    marked: T = pytest.mark.system(pytest.mark.timeout(900)(test))
+    return marked
+
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -71,6 +84,7 @@ def text(page: str) -> str:
     return html.unescape(re.sub(r"<[^>]+>", "", page))
 
 
+@on_the_built_site
 def test_the_site_builds_without_a_warning(build: Build) -> None:
     said = build.done.stderr + build.done.stdout
     assert build.done.returncode == 0, said[-6000:]
@@ -79,6 +93,7 @@ def test_the_site_builds_without_a_warning(build: Build) -> None:
     assert build.seconds < 600, f"the build took {build.seconds:.0f} s"
 
 
+@on_the_built_site
 def test_no_raw_sphinx_role_is_left_in_the_html(build: Build) -> None:
     left = {}
     for page in build.pages():
@@ -88,6 +103,7 @@ def test_no_raw_sphinx_role_is_left_in_the_html(build: Build) -> None:
     assert not left, f"raw roles in the HTML (a docstring or page that was not rendered): {left}"
 
 
+@on_the_built_site
 def test_the_maths_are_rendered_by_a_local_mathjax_and_nothing_is_fetched(build: Build) -> None:
     concepts = (build.html / "concepts.html").read_text()
     scripts = re.findall(r'<script[^>]*src="([^"]+)"', concepts)
@@ -101,6 +117,7 @@ def test_the_maths_are_rendered_by_a_local_mathjax_and_nothing_is_fetched(build:
         assert not remote.search(page.read_text()), f"{page.name} loads something remote"
 
 
+@on_the_built_site
 def test_the_gallery_tutorials_ran_and_drew_their_figures(build: Build) -> None:
     scripts = sorted(TUTORIALS.glob("plot_*.py"))
     assert len(scripts) >= 3
@@ -114,6 +131,7 @@ def test_the_gallery_tutorials_ran_and_drew_their_figures(build: Build) -> None:
         assert "sphx-glr-script-out" in text, f"{page.name} shows no output"
 
 
+@on_the_built_site
 def test_the_references_are_generated_from_the_code(build: Build) -> None:
     import typer.main
     from tltrack.app import app
@@ -144,3 +162,54 @@ def test_the_references_are_generated_from_the_code(build: Build) -> None:
     api = "".join(p.read_text() for p in (build.html / "reference" / "api").glob("*.html"))
     for name in ("tltrack.declare.Parameter", "tltrack.wire.messages.Transfer", "tltrack.app"):
         assert f'id="{name}"' in api or f'id="module-{name}"' in api, name
+
+
+# ---- the pages written by hand that must follow the code (no build) ---------------------------
+
+CONTRIBUTING = DOCS / "contributing.md"
+
+
+def _package(requirement: str) -> str:
+    return re.split(r"[\s\[<>=!~;@]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+
+
+def _section(page: Path, heading: str) -> str:
+    """The text of a page's section, from its heading to the next heading of the same level."""
+    level = heading.split(" ", 1)[0]
+    text = page.read_text()
+    assert f"\n{heading}" in text, f"{page.name} has no section {heading!r}"
+    return text.split(f"\n{heading}", 1)[1].split(f"\n{level} ", 1)[0]
+
+
+def _first_cells(section: str) -> list[list[str]]:
+    """The names in backticks of the first cell of each table row (the header row aside)."""
+    rows = [line.split("|")[1] for line in section.splitlines() if line.startswith("| `")]
+    return [re.findall(r"`([^`]+)`", cell) for cell in rows]
+
+
+@pytest.mark.unit
+def test_every_pinned_dependency_is_on_the_contributing_page_with_why() -> None:
+    """The project's rule: the docs say why each dependency is there. Each ``###`` of the page's
+    dependency section names its group (``dependencies`` or an extra) in its first backticks; its
+    table lists exactly that group's packages of pyproject.toml, each pinned to one version."""
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    groups = {"dependencies": project["dependencies"], **project["optional-dependencies"]}
+    unpinned = [r for reqs in groups.values() for r in reqs if "==" not in r]
+    assert not unpinned, f"pyproject.toml: not pinned to one version: {unpinned}"
+    pinned = {_package(r): group for group, reqs in groups.items() for r in reqs}
+    section = _section(CONTRIBUTING, "## Dependencies")
+    listed: dict[str, str] = {}
+    for part in section.split("\n### ")[1:]:
+        heading, _, table = part.partition("\n")
+        group = re.search(r"`([^`]+)`", heading)
+        assert group, f"contributing.md: the heading {heading!r} names no group"
+        for names in _first_cells(table):
+            for name in names:
+                assert name not in listed, f"contributing.md lists {name} twice"
+                listed[name.lower()] = group.group(1)
+    missing = {p: g for p, g in pinned.items() if p not in listed}
+    stale = {p: g for p, g in listed.items() if p not in pinned}
+    moved = {p: (listed[p], g) for p, g in pinned.items() if p in listed and listed[p] != g}
+    assert not missing, f"pinned in pyproject.toml, not on docs/contributing.md: {missing}"
+    assert not stale, f"on docs/contributing.md, not in pyproject.toml: {stale}"
+    assert not moved, f"in another group on docs/contributing.md (page, pyproject): {moved}"
