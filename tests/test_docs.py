@@ -4,17 +4,21 @@ One build (``sphinx-build -W --keep-going``, as ``make docs`` runs it, with the 
 run again) into a temporary folder, with every proxy pointing nowhere so that any network request
 fails the build; then checks on the HTML it wrote (the system tier).
 
-And, without a build (the unit tier), a page written by hand that must follow the code: every
-pinned dependency on the contributing page.
+And, without a build (the unit tier), the pages written by hand that must follow the code: every
+pinned dependency on the contributing page, and every field of results.json on its reference page.
 """
 
 from __future__ import annotations
 
+import ast
+import dataclasses
 import html
+import inspect
 import os
 import re
 import subprocess
 import sys
+import textwrap
 import time
 import tomllib
 from collections.abc import Callable
@@ -167,6 +171,7 @@ def test_the_references_are_generated_from_the_code(build: Build) -> None:
 # ---- the pages written by hand that must follow the code (no build) ---------------------------
 
 CONTRIBUTING = DOCS / "contributing.md"
+RESULTS_JSON = DOCS / "reference" / "results-json.md"
 
 
 def _package(requirement: str) -> str:
@@ -213,3 +218,41 @@ def test_every_pinned_dependency_is_on_the_contributing_page_with_why() -> None:
     assert not missing, f"pinned in pyproject.toml, not on docs/contributing.md: {missing}"
     assert not stale, f"on docs/contributing.md, not in pyproject.toml: {stale}"
     assert not moved, f"in another group on docs/contributing.md (page, pyproject): {moved}"
+
+
+def _keys_written(func: Callable[..., Any]) -> set[str]:
+    """The string keys a function writes: of its dict displays, and ``doc["key"] = ...``."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            found |= {k.value for k in node.keys if isinstance(k, ast.Constant)}
+        elif isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Store):
+            found |= {node.slice.value} if isinstance(node.slice, ast.Constant) else set()
+    return {k for k in found if isinstance(k, str)}
+
+
+@pytest.mark.unit
+def test_the_results_json_page_names_every_field_the_code_writes() -> None:
+    from tltrack.engine import results
+    from tltrack.engine.montecarlo import FilterResult
+    from tltrack.studies import reproduce
+
+    page = RESULTS_JSON.read_text()
+    for func in (
+        results.assemble,
+        results.provenance,
+        results.position_bounds,
+        results.truth_file_record,
+        reproduce.run_all,
+    ):
+        written = _keys_written(func)
+        assert written, f"{func.__qualname__} writes no key: is this test still reading it?"
+        absent = sorted(k for k in written if f"`{k}`" not in page)
+        assert not absent, f"{func.__qualname__} writes {absent}, which {RESULTS_JSON.name} omits"
+    version = _section(RESULTS_JSON, "## The document").split("| `schema_version` |", 1)[1]
+    assert f"`{results.SCHEMA_VERSION}`" in version.split("\n", 1)[0]
+    table = _section(RESULTS_JSON, "## `filters`")
+    rows = [name for names in _first_cells(table) for name in names]
+    fields = [f.name for f in dataclasses.fields(FilterResult)]
+    assert sorted(rows) == sorted(fields), "the filters table is not FilterResult's fields"
