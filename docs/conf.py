@@ -48,7 +48,6 @@ root_doc = "index"
 smartquotes = False
 exclude_patterns = [
     "_build",
-    "_legacy_readme.md",
     "**/*.ipynb",
     "**/*.py",
     "**/*.zip",
