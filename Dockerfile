@@ -65,7 +65,7 @@ RUN pip install --no-index --no-deps /tmp/app/*.whl \
 WORKDIR /data
 # numba uses a cache directory only if the user that loads it may write there (it ignores the
 # kernels compiled above otherwise, and compiles them again at every start): give it to tltrack.
-# A host of another CPU model compiles its own kernels once into it (README, Dask cluster).
+# A host of another CPU model compiles its own kernels once into it (docs/howto/dask.md).
 RUN chown -R "${UID}:${GID}" /opt/numba-cache
 USER ${UID}:${GID}
 CMD ["tltrack", "--help"]

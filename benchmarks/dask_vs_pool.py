@@ -4,7 +4,7 @@
         [--json FILE]
 
 Starts a Dask scheduler and `dask worker --nworkers 2 --nthreads 1 --preload
-tltrack.engine.dask_preload` on loopback, as the README does by hand, then runs the same
+tltrack.engine.dask_preload` on loopback, as docs/howto/dask.md does by hand, then runs the same
 `tltrack reproduce --runs R --table2-pf-only` alternately on the local pool (2 processes) and with
 `--scheduler`, `--repeats` times each, back to back, and compares the median walls (whole commands,
 start-up included). The Table 2 rows must be the same, wall times aside.

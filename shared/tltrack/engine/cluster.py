@@ -17,7 +17,8 @@ fails at once. A worker that dies costs only the batches it held: the scheduler 
 elsewhere.
 
 Dask moves pickles: whoever can reach the scheduler can run code on the workers. Keep it on a
-private network, or use ``tls://`` addresses with Dask's security settings (README).
+private network, or use ``tls://`` addresses with Dask's security settings (docs/howto/dask.md,
+"Security").
 """
 
 from __future__ import annotations
@@ -307,12 +308,12 @@ def _connected(client_type: type[Client], scheduler: str, timeout: float) -> Ite
     except (ValueError, TypeError) as err:  # not an address, or tls:// without TLS settings
         raise SchedulerError(
             f"cannot use {scheduler!r} as a Dask scheduler address: {err}. Addresses look like "
-            "tcp://HOST:8786, or tls://HOST:8786 with Dask's TLS settings (README)"
+            "tcp://HOST:8786, or tls://HOST:8786 with Dask's TLS settings (docs/howto/dask.md)"
         ) from None
     except (OSError, TimeoutError) as err:
         raise SchedulerError(
             f"no Dask scheduler answers at {scheduler} (gave up after {timeout:.0f} s: "
-            f"{err}). Start one (README, 'Monte-Carlo sweeps on a Dask cluster'), or drop "
+            f"{err}). Start one (docs/howto/dask.md), or drop "
             f"--scheduler / {ENV} to run on the local process pool"
         ) from None
     try:

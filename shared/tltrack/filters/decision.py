@@ -28,8 +28,8 @@ measures, in the spirit of Papež & Quinn's robust transfer, bound what an undet
    (:attr:`TransferPolicy.forget`), so the fault leaves no lasting harm.
 
 The window (20 steps), the discount's form, the tempering quantile and the rollback level were
-chosen among a few candidates on seed 1 (``tltrack study robust --seed 1``); the README reports
-seed 0.
+chosen among a few candidates on seed 1 (``tltrack study robust --seed 1``);
+papers/robust/README.md reports seed 0.
 
 Optionally a communication budget caps the share of steps that use a transfer: a step may use one
 while the run's count stays within ``fraction * k`` (a token bucket, so savings carry over).

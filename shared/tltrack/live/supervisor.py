@@ -47,8 +47,9 @@ from tltrack.wire.transport import Publisher, Subscriber, ZenohSettings, open_se
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
-#: the identity each service runs under (README: who may read what); a source's tracker runs
-#: as its own operator, ``source-<id>`` (here the first source of the package's manifest)
+#: the identity each service runs under (docs/isolation.md: who may read what); a source's
+#: tracker runs as its own operator, ``source-<id>`` (here the first source of the package's
+#: manifest)
 IDENTITY = {
     **REFEREE_SERVICES,
     "primary_tracker": keys.PRIMARY,

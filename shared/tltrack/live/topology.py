@@ -1,5 +1,5 @@
 """Who runs which Zenoh router, and which router dials which: the single and the federated
-topology (README, "The live dual tracker"; deploy/zenoh/README.md has the rules and a drawing).
+topology (docs/howto/separate-hosts.md; deploy/zenoh/README.md has the rules and a drawing).
 
 - ``single``: one router for everyone, enforcing ``access/acl.json5``: every operator's data
   passes through one host, which every operator must trust.
