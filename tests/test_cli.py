@@ -124,7 +124,14 @@ def test_the_bench_times_every_row_side_by_side(tmp_path):
 
 
 def test_the_results_table_marks_a_nees_over_a_singular_covariance(capsys):
-    row = {"rmse_overall": 20.0, "lost_fraction": 0.0, "ms_per_step": None}
+    row = {
+        "rmse_overall": 20.0,
+        "lost_fraction": 0.0,
+        "ms_per_step": None,
+        "nis": 2.1,
+        "nis_above_band": 0.0,
+        "consistency": "",
+    }
     doc = {
         "filters": {
             "pf": {**row, "nees": 3.6e7, "nees_singular_rate": 0.01},

@@ -544,8 +544,13 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
         assert (
             not {"TLTRACK_ZENOH_USERNAME", "TLTRACK_ZENOH_ACCESS_CONTROL_FILE"} & env[router].keys()
         )
-    for name in ("referee.json5", "primary.json5", "source.json5", "users.txt"):
-        assert (ROOT / "shared" / "tltrack" / "access" / "routers" / name).is_file(), name
+    # ... as ``tltrack router --operator NAME`` (live/access.py renders a source's from its template)
+    services = yaml.safe_load(COMPOSE_FILE.read_text())["services"]
+    for router in COMPOSE_ROUTERS:
+        operator = {"router": "referee", "router-primary": "primary"}.get(
+            router, "source/" + router.removeprefix("router-")
+        )
+        assert services[router]["command"][:4] == ["tltrack", "router", "--operator", operator], router
 
     def variable(user: str) -> str:
         return "TLTRACK_PASSWORD_" + user.upper().replace("-", "_")

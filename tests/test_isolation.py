@@ -219,6 +219,7 @@ def test_mutual_tls_episode_with_operator_certificates(tmp_path: Path) -> None:
             ["-m", "tltrack", "router", "--listen", f"tls/127.0.0.1:{port}"],
             env=router_tls_env(certs),
         )
+        s.wait_listening("router")  # a loaded machine takes seconds to bring up a TLS router
         for name in TRACKING:
             tls = {
                 f"TLTRACK_ZENOH_{k.upper()}": str(v) for k, v in _tls(certs, IDENTITY[name]).items()
