@@ -550,7 +550,9 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
         operator = {"router": "referee", "router-primary": "primary"}.get(
             router, "source/" + router.removeprefix("router-")
         )
-        assert services[router]["command"][:4] == ["tltrack", "router", "--operator", operator], router
+        assert services[router]["command"][:4] == ["tltrack", "router", "--operator", operator], (
+            router
+        )
 
     def variable(user: str) -> str:
         return "TLTRACK_PASSWORD_" + user.upper().replace("-", "_")

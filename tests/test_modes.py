@@ -125,3 +125,45 @@ def test_the_compiled_propagation_of_mixed_modes_is_each_mode_s_model() -> None:
         compiled, pm.propagate(x, anc, modes, U, normals), rtol=1e-9, atol=1e-9
     )
     np.testing.assert_allclose(means, pm.means(x, modes), rtol=1e-9, atol=1e-9)
+
+
+def test_a_target_class_sets_the_filters_modes_and_their_chain_at_any_period() -> None:
+    from tltrack.config.target_classes import TARGET_CLASSES
+
+    for name, cls in TARGET_CLASSES.items():
+        one, two = make_config(target_class=name), make_config(target_class=name, Ts=2.0)
+        assert [m.model_dump(exclude_defaults=True) for m in one.motion_modes or []] == [
+            {k: v for k, v in m.items() if v} for m in cls.modes
+        ]
+        Pi1, Pi2 = np.array(one.mode_transition), np.array(two.mode_transition)
+        np.testing.assert_allclose(Pi1.sum(axis=1), 1.0)
+        np.testing.assert_allclose(Pi1 @ Pi1, Pi2, atol=1e-12)  # one chain, exp(G Ts)
+        np.testing.assert_allclose(one.with_(Ts=2.0).mode_transition, Pi2, atol=1e-12)
+    assert make_config().motion_modes is None  # without a class, nothing changes
+    own = [{"kind": "ct", "q1": 3.0, "q2": 1e-3}]
+    assert make_config(target_class="aircraft", motion_modes=own).mode_transition is None
+    with pytest.raises(ConfigError, match=r"target_class aircraft.*scenario ct"):
+        make_config(target_class="aircraft", scenario="cv")
+    with pytest.raises(ConfigError, match="target_class"):
+        make_config(target_class="submarine")
+
+
+def test_the_manoeuvre_study_writes_one_model_against_the_modes_on_every_truth(
+    tmp_path: Path,
+) -> None:
+    import re
+
+    from tltrack.studies import Runner, Setting, manoeuvres
+    from tltrack.studies.manoeuvres import TRUTHS
+
+    tracks = Path(__file__).resolve().parents[1] / "examples" / "tracks"
+    path = manoeuvres(
+        Setting(runs=2, particles=200), Runner(workers=1), tmp_path, tracks=tracks, longest_s=20
+    )
+    text = path.read_text()
+    for truth in TRUTHS:
+        assert f"| {truth.label} | one model |" in text and f"| {truth.label} | modes |" in text
+    assert re.search(r"[+-]\d+\.\d{3} \(\d+\.\d{3}\)", text), text  # TL - iso (MC error)
+    assert (tmp_path / "manoeuvres.png").stat().st_size > 10_000
+    with pytest.raises(ValueError, match="no such track"):
+        manoeuvres(Setting(runs=1), Runner(workers=1), tmp_path, tracks=tmp_path)

@@ -31,6 +31,10 @@ def experiment(
         typer.Option(help="the motion model: cv (Scenario 1), ct (Scenario 2), ca, or a plugin's"),
     ] = None,
     preset: Annotated[str | None, typer.Option(help="paper or arasaratnam-haykin")] = None,
+    target_class: Annotated[
+        str | None,
+        typer.Option(help="ship or aircraft: the filters take the class's fitted motion modes"),
+    ] = None,
     config: Annotated[Path | None, typer.Option(help="TOML or JSON config file")] = None,
     filters: Annotated[str, typer.Option(help="comma-separated filter names")] = "pf,tl-pf",
     particles: Annotated[int | None, typer.Option(help="particles per PF")] = None,
@@ -81,6 +85,7 @@ def experiment(
         config,
         scenario=scenario,
         preset=preset,
+        target_class=target_class,
         particles=particles,
         runs=runs,
         source_intensity=source_intensity,
@@ -143,6 +148,8 @@ def _print_table(doc: dict[str, Any]) -> None:
             "-" if ms is None else f"{ms:.3f}",
         )
     Console().print(t)
+    if "pcrlb_note" in doc:
+        console.print(f"note: {doc['pcrlb_note']}")
     for name, r in doc["filters"].items():
         if r["consistency"]:
             console.print(f"[yellow]warning:[/yellow] {name}: {r['consistency']}")

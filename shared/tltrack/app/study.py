@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -22,13 +24,15 @@ from tltrack.app.common import (
     epilog="Examples:\n\n    tltrack study robust --runs 200\n\n"
     "    tltrack study robust --kind rpf --source-filter pf --preset paper --truth fixed\n\n"
     "    tltrack study heterogeneous --runs 200\n\n"
-    "    tltrack study realizations --realizations 100 --runs 50 --preset paper"
+    "    tltrack study realizations --realizations 100 --runs 50 --preset paper\n\n"
+    "    tltrack study manoeuvres --runs 200"
 )
 def study(
     name: Annotated[
         str,
         typer.Argument(
-            help="robust, sources, budget, heterogeneous, presets, intensities or realizations"
+            help="robust, sources, budget, heterogeneous, presets, intensities, realizations "
+            "or manoeuvres"
         ),
     ],
     runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
@@ -50,6 +54,9 @@ def study(
     filters: Annotated[
         str, typer.Option(help="filters (study realizations)")
     ] = "pf,tl-pf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5",
+    tracks: Annotated[
+        Path, typer.Option(help="the recorded tracks' folder (study manoeuvres)")
+    ] = Path("examples/tracks"),
     workers: Workers = None,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
@@ -64,13 +71,14 @@ def study(
         except ValueError:
             return False
 
-    by_name = {
+    by_name: dict[str, Callable[[studies.Setting, studies.Runner, Path], Path]] = {
         "robust": studies.robust,
         "sources": studies.sources,
         "budget": studies.budget,
         "heterogeneous": studies.heterogeneous,
         "presets": studies.presets,
         "intensities": studies.intensities,
+        "manoeuvres": functools.partial(studies.manoeuvres, tracks=tracks),
     }
     known = [*by_name, "realizations"]
     problems = [
@@ -83,9 +91,10 @@ def study(
         console.print(f"[red]error:[/red] {'; '.join(p for p in problems if p)}")
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
-    total = runs * (realizations if name == "realizations" else 1)
+    configurations = {"realizations": realizations, "manoeuvres": studies.MANOEUVRE_CONFIGS}
+    total = runs * configurations.get(name, 1)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
-        task = bar.add_task(name, total=None)
+        task = bar.add_task(name, total=total if name in configurations else None)
         runner = studies.Runner(lambda n: bar.advance(task, n), workers, batch_size, executor)
         try:
             if name == "realizations":

@@ -29,6 +29,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from tltrack.config.target_classes import TARGET_CLASSES, TargetClassName
 from tltrack.declare import Parameter, UnknownKindError
 from tltrack.filters.kinds import FILTERS
 from tltrack.models.kinds import MOTIONS, SENSORS
@@ -49,6 +50,17 @@ def preset_values(scenario: str, preset: str) -> dict[str, Any]:
     """The scenario's seed values with the preset's differences applied."""
     defaults = MOTIONS.get(scenario).defaults
     return {**defaults, **PRESET_OVERRIDES[preset].get(scenario, {})}
+
+
+def _class_fields(data: dict[str, Any], Ts: Any) -> dict[str, Any]:
+    """What the mapping's ``target_class`` fills at its period ``Ts`` (the modes and their
+    chain); nothing when the mapping gives its own ``motion_modes``."""
+    name = data.get("target_class")
+    if name not in TARGET_CLASSES or data.get("motion_modes") is not None:
+        return {}
+    if not isinstance(Ts, int | float) or not math.isfinite(Ts) or Ts <= 0:
+        return {}  # Ts's validator names it
+    return TARGET_CLASSES[name].fields(float(Ts))
 
 
 def trusted(info: ValidationInfo) -> bool:
@@ -332,6 +344,11 @@ class Config(BaseModel):
         description="the modes' Markov chain: row i, the probabilities of each mode after mode i",
         json_schema_extra=unit("1"),
     )
+    target_class: TargetClassName | None = Field(
+        None,
+        description="a kind of target (ship, aircraft) whose fitted motion_modes and "
+        "mode_transition the filters take unless given; none: the scenario's single model",
+    )
     filter_options: dict[str, dict[str, float]] = Field(
         default_factory=dict,
         description="per filter kind, values of the parameters it declares (e.g. "
@@ -358,7 +375,10 @@ class Config(BaseModel):
             scenario = MOTIONS.canonical(scenario, trusted=trusted(info))
         except UnknownKindError:
             return data  # the scenario's validator names it
-        return {**preset_values(scenario, preset), **data, "scenario": scenario}
+        values = {**preset_values(scenario, preset), **data, "scenario": scenario}
+        Ts = values.get("Ts", cls.model_fields["Ts"].default)
+        filled = _class_fields(values, Ts)  # a copy's model_dump holds None for each
+        return {**values, **{k: v for k, v in filled.items() if values.get(k) is None}}
 
     @field_validator("scenario")
     @classmethod
@@ -407,6 +427,11 @@ class Config(BaseModel):
 
     def _check_modes(self) -> None:
         modes, Pi = self.motion_modes, self.mode_transition
+        if self.target_class is not None and self.scenario != "ct":
+            raise ValueError(
+                f"target_class {self.target_class}: its modes share the coordinated turn's "
+                "state: use scenario ct"
+            )
         if modes is None:
             if Pi is not None:
                 raise ValueError("mode_transition needs motion_modes")
@@ -462,6 +487,11 @@ class Config(BaseModel):
         if {"scenario", "preset"} & changes.keys():
             old = preset_values(self.scenario, self.preset)
             data = {k: v for k, v in data.items() if k not in old or old[k] != v}
+        if self.target_class is not None and {"Ts", "target_class"} & changes.keys():
+            filled = TARGET_CLASSES[self.target_class].fields(self.Ts)
+            modes = [ModeSpec(**m) for m in filled["motion_modes"]]
+            if self.motion_modes == modes and self.mode_transition == filled["mode_transition"]:
+                data = {k: v for k, v in data.items() if k not in filled}  # the class fills anew
         return make_config(data, trusted=trusted_changes, **changes)
 
     def with_source_intensity(self, intensity: float) -> Config:

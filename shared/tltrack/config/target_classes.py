@@ -6,8 +6,9 @@ sampling period: over a step of Ts the transition matrix is Pi = exp(G Ts). The 
 scenario's model and the preset still sets the sensors; a ``motion_modes`` or ``mode_transition``
 given explicitly wins over the class's.
 
-The values and the tracks they were fitted on are in docs/manoeuvres.md, with the commands
-(``tltrack fit``).
+Each class is ``tltrack fit --model manoeuvres`` (or ``modes``) on the tracks named with it, all
+in examples/tracks; the fits, their intervals and the commands are on the docs site's page
+docs/howto/manoeuvring-targets.md.
 """
 
 from __future__ import annotations
@@ -64,5 +65,18 @@ def uniform_rates(M: int, rate: float) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(0.0 if i == j else rate / (M - 1) for j in range(M)) for i in range(M))
 
 
-#: every class, by name (values: docs/manoeuvres.md)
-TARGET_CLASSES: dict[str, TargetClass] = {}
+#: the five real flights and the two simulated aircraft of examples/tracks (566 reports): a
+#: straight mode, a turn and a manoeuvre, left at 0.0488 /s
+AIRCRAFT = TargetClass(
+    "aircraft",
+    (
+        {"kind": "cv", "q1": 21.694},
+        {"kind": "ct", "q1": 2.0753, "q2": 5.43697e-05},
+        {"kind": "ct", "q1": 4.78573, "q2": 0.00162539},
+    ),
+    uniform_rates(3, 0.0488321),
+    {"q1": 2.0753, "q2": 5.43697e-05},
+)
+
+#: every class, by name
+TARGET_CLASSES: dict[str, TargetClass] = {c.name: c for c in (AIRCRAFT,)}

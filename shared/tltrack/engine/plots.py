@@ -42,7 +42,8 @@ def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
             color="grey",
             lw=1,
             ls="-" if label == "primary" else "--",
-            label=f"PCRLB, {label.replace('_', ' ')}",
+            label=f"PCRLB, {label.replace('_', ' ')}"
+            + (" (single model)" if "pcrlb_note" in doc else ""),
         )
     ax.set_xlabel("time step k [s]")
     ax.set_ylabel("position RMSE [m]")

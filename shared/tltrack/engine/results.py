@@ -43,6 +43,14 @@ def provenance() -> dict[str, Any]:
     }
 
 
+#: what the bound is when the filters carry motion modes (results' ``pcrlb_note``)
+PCRLB_MODES_NOTE = (
+    "the PCRLB is the scenario's single model's along the truth: the bound of a target that "
+    "switches between modes (a jump-Markov model) is out of scope, and the filters' modes do "
+    "not enter it"
+)
+
+
 def position_bounds(cfg: Config) -> dict[str, list[float]]:
     """PCRLB of the primary alone, and with every source's raw data, averaged over the truths."""
     setup = Setup(cfg)
@@ -67,6 +75,8 @@ def assemble(cfg: Config, results: dict[str, FilterResult]) -> dict[str, Any]:
     }
     if cfg.truth == "file":
         doc["truth"] = truth_file_record(cfg)
+    if cfg.motion_modes is not None:
+        doc["pcrlb_note"] = PCRLB_MODES_NOTE
     return doc
 
 

@@ -6,7 +6,8 @@
 - :mod:`~.heterogeneous`: operators with different sensors;
 - :mod:`~.presets`: lost tracks and the paired claims in every preset and truth mode;
 - :mod:`~.intensities`: TL against isolated at every primary intensity;
-- :mod:`~.realizations`: the paper's trajectory as a measured distribution.
+- :mod:`~.realizations`: the paper's trajectory as a measured distribution;
+- :mod:`~.manoeuvres`: one motion model against a target class's modes, on manoeuvring targets.
 
 :mod:`~.common` holds what they share: a :class:`~.common.Setting` (runs, seed, filter kind,
 base configuration), a :class:`~.common.Runner` (how the engine runs) and paired differences.
@@ -16,17 +17,21 @@ from tltrack.studies.budget import budget
 from tltrack.studies.common import Runner, Setting
 from tltrack.studies.heterogeneous import heterogeneous
 from tltrack.studies.intensities import intensities
+from tltrack.studies.manoeuvres import CONFIGS as MANOEUVRE_CONFIGS
+from tltrack.studies.manoeuvres import manoeuvres
 from tltrack.studies.presets import presets
 from tltrack.studies.realizations import realizations
 from tltrack.studies.robust import robust
 from tltrack.studies.sources import sources
 
 __all__ = [
+    "MANOEUVRE_CONFIGS",
     "Runner",
     "Setting",
     "budget",
     "heterogeneous",
     "intensities",
+    "manoeuvres",
     "presets",
     "realizations",
     "robust",

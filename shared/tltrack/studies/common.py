@@ -127,10 +127,10 @@ class Setting:
             "seed": self.seed,
             **changes,
         }
-        if self.truth_file is None:
+        if self.truth_file is not None:
+            data.setdefault("truth_file", self.truth_file)
+        if data.get("truth_file") is None:
             data.setdefault("truth", self.truth)
-        else:
-            data["truth_file"] = self.truth_file
         if self.source_filter is not None:
             srcs = data.get("sources", [{"id": "s1"}])
             data["sources"] = [{**s, "filter": self.source_filter} for s in srcs]
