@@ -544,7 +544,7 @@ def test_compose_identities_and_passwords_match_users_txt(compose: list[str]) ->
         assert (
             not {"TLTRACK_ZENOH_USERNAME", "TLTRACK_ZENOH_ACCESS_CONTROL_FILE"} & env[router].keys()
         )
-    # ... as ``tltrack router --operator NAME`` (live/access.py renders a source's from its template)
+    # ... as ``tltrack router --operator NAME`` (a source's rules: rendered from its template)
     services = yaml.safe_load(COMPOSE_FILE.read_text())["services"]
     for router in COMPOSE_ROUTERS:
         operator = {"router": "referee", "router-primary": "primary"}.get(
