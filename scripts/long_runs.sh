@@ -28,6 +28,7 @@ HETERO="$(results heterogeneous)"
 ROBUST="$(results robust)"
 LATENCY="$(results latency)"
 DASK="$(results dask)"
+MANOEUVRES="$(results manoeuvres)"
 
 run() {  # run DIR NAME ARGS...: the command, its log and its wall time in DIR/NAME.log
     local dir="$1" name="$2"; shift 2
@@ -81,6 +82,11 @@ done
 for s in robust sources budget; do
     run "$ROBUST" "$s-pf" study "$s" --runs 200 --out "$ROBUST"
 done
+
+# ---- papers/manoeuvres: one model against the target class's modes on every truth
+run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
+run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 6 \
+    --json "$MANOEUVRES/modes_step.json"
 
 # ---- papers/rpf: the particle filter that keeps the track
 run "$RPF" remedies-eval-s3 --script papers/rpf/rpf_remedies.py --runs 300 --seed 3 \

@@ -78,5 +78,14 @@ AIRCRAFT = TargetClass(
     {"q1": 2.0753, "q2": 5.43697e-05},
 )
 
+#: the four AIS vessels of examples/tracks (171 reports, 61-120 s apart): a straight and a turning
+#: mode, left at 0.000174 /s (a third, manoeuvring, mode took no weight: its rate fitted to 1e-20)
+SHIP = TargetClass(
+    "ship",
+    ({"kind": "cv", "q1": 1.91776e-05}, {"kind": "ct", "q1": 0.00200374, "q2": 3.86855e-10}),
+    uniform_rates(2, 0.000174088),
+    {"q1": 0.00200374, "q2": 3.86855e-10},
+)
+
 #: every class, by name
-TARGET_CLASSES: dict[str, TargetClass] = {c.name: c for c in (AIRCRAFT,)}
+TARGET_CLASSES: dict[str, TargetClass] = {c.name: c for c in (SHIP, AIRCRAFT)}

@@ -278,18 +278,18 @@ def _hessian(f: Callable[[Array], float], x: Array, h: float = 0.1) -> Array:
 def fit(tracks: Sequence[Reports], kind: Kind = "cv", start: dict[str, float] | None = None) -> Fit:
     """The maximum-likelihood parameters of ``kind`` on ``tracks``, with 95% intervals.
 
-    ``manoeuvres`` is fitted in stages, each a fit of its own model (a search over all seven
-    parameters, a second of CPU per evaluation, does not end in a session): q1_straight from
-    the cv fit, q1_turn, q2_turn and sigma from the ct fit, then the manoeuvring mode's noise
-    and the switching rate with those held; each parameter's interval is its own stage's.
+    ``modes`` and ``manoeuvres`` are fitted in stages, each a fit of its own model (a search
+    over all their parameters, a second of CPU per evaluation, did not end in an hour on four
+    ships): q1_straight from the cv fit, q1_turn, q2_turn and sigma from the ct fit, then the
+    switching rate (and the manoeuvring mode's noise) with those held; each parameter's interval
+    is its own stage's.
     """
     if kind == "cv":
         return _fit_cv(tracks)
     cv = _fit_cv(tracks)
-    if kind != "manoeuvres":
+    if kind == "ct":
         q1 = cv.values["q1"]  # the nested straight model's fit: where the search starts
-        first = {**START, "q1": q1, "q1_straight": q1, "q1_turn": q1, "sigma": cv.values["sigma"]}
-        first |= start or {}
+        first = {**START, "q1": q1, "sigma": cv.values["sigma"], **(start or {})}
         return _search(tracks, kind, first, {})
     ct = fit(tracks, "ct", start)
     held = {
