@@ -17,10 +17,14 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/tltrack demo
 
+## Test processes: one more than the cores, since the integration and system tests spend about
+## 40% of their time waiting on the processes and containers they start (docs/contributing.md).
+WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
+
 ## Every test, on every core: unit, integration over real Zenoh, system (containers, the wheel,
 ## the browser, the golden worktree); ruff and mypy. The 25 slowest tests are listed at the end.
 test: $(STAMP) lint warm
-	$(PYTEST) -q -ra -n auto --dist loadgroup --durations=25
+	$(PYTEST) -q -ra -n $(WORKERS) --dist loadgroup --durations=25
 
 ## The fast everyday subset: lint, types and the unit tier.
 check: $(STAMP) lint warm

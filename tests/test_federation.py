@@ -131,8 +131,10 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
     x = truth(Setup(cfg), 0)
     raw = {sid: sentinels(measurements(Setup(cfg), 0, x, sid)) for sid in ("primary", "s1")}
     assert found(raw["s1"], local) == len(raw["s1"]), "the sentinels are not what travels"
+    # the source's link carried every step's transfer (each names its kind once)
+    assert wire["source/s1", "primary"].count(b"\xa8transfer") >= K - 1
     for link, data in wire.items():
-        assert len(data) > 10_000, link  # the link carried the episode
+        assert data, link
         assert found(raw["s1"], data) == 0, f"source s1's raw data on {link}"
         assert found(raw["primary"], data) == 0, f"the primary's raw data on {link}"
         assert found(sentinels(x[1:]), data) == 0, f"the truth on {link}"
@@ -199,8 +201,8 @@ def test_faults_between_routers(tmp_path, fault):
         # The primary's router still knows the source's router, through the referee's (the
         # routers share one link-state graph), so the source's token outlives a cut link: the
         # primary waits deadline_ms for each transfer, which the referee's router drops. Keep
-        # that wait under the step period.
-        run_episode(s, db, FAULT_K, 20.0, primary_env={"TLTRACK_PRIMARY_DEADLINE_MS": "20"})
+        # that wait under the step period (50 ms), with room for a loaded machine's delays.
+        run_episode(s, db, FAULT_K, 20.0, primary_env={"TLTRACK_PRIMARY_DEADLINE_MS": "40"})
         assert wait_until(lambda: _reached(db, 30), 90), logs(s)
         if fault == "link-cut":
             relays["source/s1", "primary"].cut()
