@@ -173,6 +173,8 @@ class AuxiliaryParticleFilter:
         self._kernel_rngs = [g.spawn(1)[0] for g in self.rngs] if bandwidth > 0 else []
         self.modes = None if modes is None else ParticleModes(modes, self.rngs, n_particles)
         self._next: NDArray[np.int64] | None = None  # each slot's mode for the pending step
+        #: the last ancestry and the modes gathered along it (:meth:`_chosen_modes`)
+        self._gathered: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
         #: how many times each run was regularised
         self.regularised = np.zeros(len(self.rngs), dtype=np.int64)
         B = x0_hat.shape[1]
@@ -209,7 +211,7 @@ class AuxiliaryParticleFilter:
         for b, g in enumerate(self.rngs):
             g.random(out=self._U[b])
         if self.modes is not None:
-            self._next = self.modes.switch(self.modes.of)
+            self._next, self._gathered = self.modes.switch(self.modes.of), None
         self._pending, self._preview, self._means, self._moments = True, None, None, None
 
     def update(self, observations: Sequence[Observation]) -> None:
@@ -268,7 +270,7 @@ class AuxiliaryParticleFilter:
         self._x, self._moments = x, (mean, cov)
         self._pending, self._preview, self._means, self._reset = False, None, None, {}
         if self.modes is not None and self._next is not None:
-            self.modes.of = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
+            self.modes.of = self._chosen_modes(anc)
 
     @property
     def anchors(self) -> Array:
@@ -346,8 +348,7 @@ class AuxiliaryParticleFilter:
         p = self.mode_probabilities
         if p is None or self.modes is None:
             return Estimate(mean.copy(), cov + self.model.Q)
-        Qs = np.stack([m.Q for m in self.modes.modes.models])
-        return Estimate(mean.copy(), cov + np.einsum("mb,mij->bij", p, Qs))
+        return Estimate(mean.copy(), cov + np.einsum("mb,mij->bij", p, self.modes.Qs))
 
     @property
     def mode_probabilities(self) -> Array | None:
@@ -432,7 +433,7 @@ class AuxiliaryParticleFilter:
         f and L of the ancestor's new mode."""
         src = self._x if x_prev is None else x_prev
         if self.modes is not None and self._next is not None:
-            modes = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
+            modes = self._chosen_modes(anc)
             return self.modes.propagate(src, anc, modes, self._U, self.gaussians)
         if self._propagate is not None and self._fast(src):
             out = np.empty_like(src)
@@ -443,6 +444,15 @@ class AuxiliaryParticleFilter:
         return np.ascontiguousarray(
             self.model.f(chosen) + np.tensordot(self._L, self.gaussians(), axes=1)
         )
+
+    def _chosen_modes(self, anc: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Each slot's new mode, its ancestor's: gathered once per ancestry (the propagation
+        and the update of a step ask for the same)."""
+        assert self._next is not None
+        if self._gathered is None or self._gathered[0] is not anc:
+            modes = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
+            self._gathered = (anc, modes)
+        return self._gathered[1]
 
     def _apply_reset(self, x: Array) -> None:
         for b, particles in self._reset.items():

@@ -189,7 +189,7 @@ class ParticleFilter:
         p = self.mode_probabilities
         if p is None or self.modes is None:
             return np.asarray(self.model.Q)
-        return np.einsum("mb,mij->bij", p, np.stack([m.Q for m in self.modes.modes.models]))
+        return np.einsum("mb,mij->bij", p, self.modes.Qs)
 
     def predict(self) -> None:
         """x_k^(i) ~ p(x_k | x_{k-1}^(i)) (seed eq. BTL_tr_particle_2), noise through Q_sqrt."""

@@ -42,6 +42,8 @@ class ParticleModes:
         self._mixed = fastpath.modes_propagator(modes.models, N)
         self._u = np.empty((len(rngs), N))  # the switches' uniforms (scratch)
         self._L = [fastpath.f64(m.Q_sqrt) for m in modes.models]
+        #: (M, n, n): each mode's Q
+        self.Qs = np.stack([m.Q for m in modes.models])
 
     def switch(self, previous: Modes) -> Modes:
         """Each particle's next mode (B, N) given its mode ``previous`` (B, N): one uniform per
@@ -57,9 +59,11 @@ class ParticleModes:
     def probabilities(self, modes: Modes, weights: Array | None = None) -> Array:
         """(M, B): each mode's share of the cloud (weighted by ``weights`` (B, N) if given); a
         mode that holds every particle has exactly 1."""
+        B, M = modes.shape[0], self.modes.M
         w = np.ones(modes.shape) if weights is None else weights
-        shares = np.stack([(w * (modes == j)).sum(axis=1) for j in range(self.modes.M)])
-        return np.asarray(shares / w.sum(axis=1))
+        slot = (modes + M * np.arange(B)[:, None]).ravel()  # run b's mode j: bin b M + j
+        shares = np.bincount(slot, weights=w.ravel(), minlength=B * M).reshape(B, M).T
+        return np.asarray(shares / shares.sum(axis=0))  # one mode's share: exactly 1
 
     def means(self, x: Array, modes: Modes) -> Array:
         """f_m(x) of every particle (n, B, N) under its own mode (B, N): a run whose particles
