@@ -768,7 +768,7 @@ def test_partitioned_source_primary_carries_on_and_transfer_resumes(stack: Stack
 
 
 def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
-    """README, "Three source operators": the profile's trackers join the running stack under their
+    """docs/tutorials/many-sources.md: the profile's trackers join the running stack under their
     own identities (source-s2, source-s3), and one episode of deploy/three-sources.toml is scored
     with the three sources' tracks and TL-PF using their transfers, nothing rejected."""
     before = wait_for_summary(stack.endpoint, lambda s: bool(scored(s, "part-")), timeout=300)
@@ -819,7 +819,7 @@ def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
 
 
 def test_a_recorded_track_is_the_truth(stack: Stack) -> None:
-    """README, "Recorded tracks as truth": TLTRACK_SIM_TRUTH_FILE names a track under
+    """docs/tutorials/recorded-tracks.md: TLTRACK_SIM_TRUTH_FILE names a track under
     /config/tracks, where compose mounts examples/tracks; the truth mode is left empty, and the
     episode is scored against the track (K shortened by TLTRACK_SIM_STEPS)."""
     steps = 30

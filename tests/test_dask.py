@@ -1,10 +1,10 @@
 """Monte-Carlo sweeps on a Dask cluster (``--scheduler``), against the local process pool.
 
-The cluster is real processes on loopback, as the README starts them by hand: `dask scheduler`
-and `dask worker` commands (never an in-process LocalCluster). Worker A has the preload and a
-fresh NUMBA_CACHE_DIR, so it compiles the kernels at start; worker B has no preload. Every
-process a test starts is stopped by its id at the end, the worker processes the nannies spawned
-included (their ids come from the cluster itself).
+The cluster is real processes on loopback, as docs/howto/dask.md starts them by hand:
+`dask scheduler` and `dask worker` commands (never an in-process LocalCluster). Worker A has the
+preload and a fresh NUMBA_CACHE_DIR, so it compiles the kernels at start; worker B has no
+preload. Every process a test starts is stopped by its id at the end, the worker processes the
+nannies spawned included (their ids come from the cluster itself).
 
 The first tests need no cluster: how the options combine, and that results are merged in batch
 order whatever order batches complete in.
