@@ -30,10 +30,11 @@ test: $(STAMP) lint warm
 check: $(STAMP) lint warm
 	$(PYTEST) -q -ra -n auto -m unit
 
-## The documentation site, into docs/_build/html (open docs/_build/html/index.html). Warnings are
+## The documentation site, into docs/_build/html (open site/index.html, a link to it). Warnings are
 ## errors: a broken link, reference or tutorial fails it (tests/test_docs.py runs it in make test).
 docs: $(STAMP) warm
 	$(BIN)/sphinx-build -b html -W --keep-going -q docs docs/_build/html -d docs/_build/doctrees
+	ln -sfn docs/_build/html site
 
 ## Compile the particle-filter kernels once, so parallel test processes load them from the cache.
 warm: $(STAMP)
@@ -61,4 +62,4 @@ zenohd:
 
 clean:
 	rm -rf $(VENV) out build .pytest_cache .mypy_cache .ruff_cache
-	rm -rf docs/_build docs/tutorials/gallery docs/reference/api
+	rm -rf docs/_build docs/tutorials/gallery docs/reference/api site
