@@ -85,7 +85,7 @@ done
 
 # ---- papers/manoeuvres: one model against the target class's modes on every truth
 run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
-run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 6 \
+run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
     --json "$MANOEUVRES/modes_step.json"
 
 # ---- papers/rpf: the particle filter that keeps the track

@@ -449,6 +449,8 @@ class AuxiliaryParticleFilter:
         """Each slot's new mode, its ancestor's: gathered once per ancestry (the propagation
         and the update of a step ask for the same)."""
         assert self._next is not None
+        if anc is self._identity:  # the predicted cloud's: every slot its own ancestor
+            return self._next
         if self._gathered is None or self._gathered[0] is not anc:
             modes = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
             self._gathered = (anc, modes)

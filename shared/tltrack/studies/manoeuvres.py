@@ -99,7 +99,8 @@ def manoeuvres(
     lines = [
         "# Manoeuvring targets: one model against the class's modes",
         "",
-        f"{setting.describe(cfg).split(', ', 2)[2]}; each truth at most {longest_s:g} s. "
+        f"`{cfg.preset}`, I_p = {cfg.primary_intensity:g}, N = {cfg.particles}, {cfg.runs} "
+        f"runs, seed {cfg.seed}; each truth at most {longest_s:g} s. "
         f"Diverged: run RMSE over {DIVERGED_M:g} m. NIS: the share of 20-step windows above "
         "the 99% band. TL - iso: the paired per-run RMSE difference, MC error (2 SE) in brackets.",
         "",
