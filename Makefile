@@ -23,7 +23,8 @@ WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 
 ## Every test, on every core: unit, integration over real Zenoh, system (containers, the wheel,
 ## the browser, the golden worktree); ruff and mypy. The 25 slowest tests are listed at the end.
-test: $(STAMP) lint warm
+test: $(STAMP)
+	$(MAKE) --no-print-directory -j2 lint warm  # each on a core of its own: two single-threaded jobs
 	$(PYTEST) -q -ra -n $(WORKERS) --dist loadgroup --durations=25
 
 ## The fast everyday subset: lint, types and the unit tier.
