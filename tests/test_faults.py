@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from livestack import SIM_DEFAULTS, logs, stack, wait_until
+from livestack import SIM_DEFAULTS, logs, mostly_used, stack, wait_until
 from security_helpers import (
     SCORER_ENV,
     router_starts,
@@ -303,8 +303,7 @@ def test_router_dies_and_returns(tmp_path: Path) -> None:
     resumed = sorted(k for (k,) in sensed)
     assert resumed, "no step was sensed after the router came back"
     assert all(k in tl for k in resumed), "the primary missed steps after the router came back"
-    # one step in ten may miss its transfer's deadline on a loaded machine, as a late one should
     used = [tl[k][1] for k in resumed]
-    assert sum(used) >= 0.9 * len(used), f"no transfer after the router came back: {used}"
+    assert mostly_used(used), f"no transfer after the router came back: {used}"
     assert len(rows(db, "SELECT k FROM truth")) < K, "no step was lost: the router was not down"
     assert_genuine(db, E1, FIRST_RUN, K, ("rpf", "source-rpf"), upto=killed_at)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from livestack import estimates, logs, sim_flags, wait_until
+from livestack import estimates, logs, mostly_used, sim_flags, wait_until
 from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
 from tltrack.config import Config, make_config
@@ -220,10 +220,8 @@ def test_faults_between_routers(tmp_path, fault):
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
     used = _transfer_use(db)
-    # a transfer later than the deadline leaves its step isolated, as it should: on a loaded
-    # machine one in a few dozen is (one of 21 in a run beside a CPU-bound job)
     before = [used[k] for k in range(2, hit - 1)]
-    assert sum(before) >= 0.9 * len(before), f"transfer unused before the fault: {before}"
+    assert mostly_used(before), f"transfer unused before the fault: {before}"
     during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
     if fault == "primary-router-restarts":  # its sensor had no clock: gaps, not estimates
         assert not during, "the primary stepped while its router was down"
@@ -235,7 +233,7 @@ def test_faults_between_routers(tmp_path, fault):
         assert not any(tail), "transfer after the source's router went away"
     else:
         assert back < FAULT_K - 25, "the fault outlasted the episode"
-        assert sum(tail) >= 0.9 * len(tail), f"transfer did not resume: {tail}"
+        assert mostly_used(tail), f"transfer did not resume: {tail}"
 
 
 def _tls_env(ca: Path, cert: Path) -> dict[str, str]:

@@ -7,7 +7,16 @@ import sqlite3
 import msgpack
 import numpy as np
 import pytest
-from livestack import connecting, estimates, logs, sim_flags, stack, start_all, wait_until
+from livestack import (
+    connecting,
+    estimates,
+    logs,
+    mostly_used,
+    sim_flags,
+    stack,
+    start_all,
+    wait_until,
+)
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
 from tltrack.live import latency, supervisor
@@ -73,10 +82,8 @@ def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
         assert summary is not None, logs(s)
     tl = estimates(db)["tl-rpf"]
     assert sorted(tl) == list(range(1, K + 1)), "the primary missed steps"
-    # a transfer later than its deadline leaves its step isolated, as it should: on a loaded
-    # machine one in a few dozen is
     before = [tl[k][1] for k in range(2, killed_at - 1)]
-    assert sum(before) >= 0.9 * len(before), f"transfer unused before the kill: {before}"
+    assert mostly_used(before), f"transfer unused before the kill: {before}"
     assert not any(tl[k][1] for k in range(killed_at + 3, K + 1)), "transfer after the kill"
     assert summary["filters"]["tl-rpf"]["steps_with_transfer"] < K - 10
 
