@@ -32,6 +32,7 @@ from pydantic_core import PydanticCustomError
 from tltrack.config.target_classes import TARGET_CLASSES, TargetClassName
 from tltrack.declare import Parameter, UnknownKindError
 from tltrack.filters.kinds import FILTERS
+from tltrack.models.detection import Detection
 from tltrack.models.kinds import MOTIONS, SENSORS
 
 Preset = Literal["paper", "arasaratnam-haykin"]
@@ -155,6 +156,35 @@ class SensorSpec(BaseModel):
         return hash((self.kind, self.position, tuple(sorted(self.params.items()))))
 
 
+class DetectionSpec(BaseModel):
+    """An operator's detection process (:mod:`tltrack.models.detection`): missed detections,
+    false alarms and the field of view, in its sensor's measurement components. The defaults are
+    the paper's sensor: the target's measurement in every scan, and nothing else."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    pd: float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description="probability of detecting the target in a scan",
+        json_schema_extra=unit("1"),
+    )
+    clutter_rate: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="mean false alarms per scan (Poisson)",
+        json_schema_extra=unit("1"),
+    )
+    fov: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
+        default_factory=dict,
+        description="field of view: component name (range_m, bearing_rad, x_m, y_m, "
+        "range_rate_mps) -> [lo, hi]; a bearing sector across +-pi has lo > hi",
+        json_schema_extra=unit("each component's own"),
+    )
+
+
 class ModeSpec(BaseModel):
     """One motion mode of the filters (``motion_modes``), in the coordinated turn's state:
     ``cv`` holds the turn rate at 0, ``ct`` turns with turn-rate noise q2."""
@@ -205,6 +235,7 @@ class SourceSpec(BaseModel):
     fault: SourceFault = "none"
     filter: str | None = Field(None, description="a registered filter kind")
     sensor: SensorSpec | None = Field(None, description="default: the paper's range-bearing")
+    detection: DetectionSpec | None = Field(None, description="default: no miss, no clutter")
 
     @field_validator("filter")
     @classmethod
@@ -271,6 +302,9 @@ class Config(BaseModel):
         None, description="the sensor's position; (0, 0)", json_schema_extra=unit("m")
     )
     primary_sensor: SensorSpec | None = Field(None, description="default: the paper's radar")
+    primary_detection: DetectionSpec | None = Field(
+        None, description="the primary's detection process; default: no miss, no clutter"
+    )
     sources: list[SourceSpec] = Field(
         default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
     )
@@ -315,6 +349,13 @@ class Config(BaseModel):
         gt=0,
         lt=1,
         description="robust TL: probability an honest transfer passes the gate",
+        json_schema_extra=unit("1"),
+    )
+    pda_gate_probability: float = Field(
+        0.99,
+        gt=0,
+        lt=1,
+        description="UKF/CKF in clutter: probability the target's detection is in the PDA gate",
         json_schema_extra=unit("1"),
     )
     recovery: bool = Field(False, description="reinitialise a particle filter that lost track")
@@ -423,6 +464,12 @@ class Config(BaseModel):
         if self.primary_position is not None and sensor is not None and sensor.position:
             raise ValueError("give either primary_position or primary_sensor.position, not both")
         self._check_modes()
+        for sid in self.sensor_ids:
+            try:
+                detection_of(self, sid)
+            except ValueError as err:
+                where = "primary_detection" if sid == PRIMARY else f"sources.{sid}.detection"
+                raise ValueError(f"{where}: {err}") from None
         return self
 
     def _check_modes(self) -> None:
@@ -541,3 +588,15 @@ def position_of(cfg: Config, sensor_id: str = PRIMARY) -> tuple[float, float]:
         spec, position = src.sensor, src.position
     at = (spec.position if spec is not None else None) or position or (0.0, 0.0)
     return (float(at[0]), float(at[1]))
+
+
+def detection_of(cfg: Config, sensor_id: str = PRIMARY) -> Detection:
+    """An operator's detection process, checked against its sensor's components."""
+    if sensor_id == PRIMARY:
+        spec, given = cfg.primary_sensor, cfg.primary_detection
+    else:
+        src = next(s for s in cfg.sources if s.id == sensor_id)
+        spec, given = src.sensor, src.detection
+    components = tuple(SENSORS.get(spec.kind if spec is not None else "range-bearing").components)
+    d = given or DetectionSpec.model_validate({})
+    return Detection(components, d.pd, d.clutter_rate, dict(d.fov))

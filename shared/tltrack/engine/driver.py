@@ -35,6 +35,7 @@ from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import TransferPolicy
 from tltrack.filters.transfer import Primary, Source
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
 #: a transfer's path: (the source filter's name, the source operator's id)
@@ -202,7 +203,7 @@ class Sources:
             self.names[name, sid] = reported_name(spec, sid, n)
 
     def step(
-        self, k: int, z: Mapping[str, Observation | None], only: Iterable[Link] | None = None
+        self, k: int, z: Mapping[str, Statement | None], only: Iterable[Link] | None = None
     ) -> dict[Link, Observation]:
         """Step the source filters (those of ``only``, default all) on their operator's
         ``z[sid]`` (None: it never came; predict through it); returns each one's transfer for
@@ -228,7 +229,7 @@ class Sources:
 
 
 #: a primary's statements besides its own z_k, by its role
-Feed = Callable[[FilterSpec], list[Observation]]
+Feed = Callable[[FilterSpec], list[Statement]]
 
 
 class Primaries:
@@ -271,7 +272,7 @@ class Primaries:
         self.roles = {s.name: self.roles[s.name] for s in specs}  # in the order asked for
 
     def step(
-        self, k: int, z: Observation | None, feed: Feed, only: Iterable[str] | None = None
+        self, k: int, z: Statement | None, feed: Feed, only: Iterable[str] | None = None
     ) -> dict[str, Estimate]:
         """Step the primaries (those named in ``only``, in their order; default all) on their
         own ``z`` (None: it never came) and what ``feed`` gives each by its role.
@@ -370,7 +371,7 @@ class Driver:
             Primaries(s, specs, x0_hat, runs, cs) for s, cs in zip(self.setups, hear, strict=True)
         ]
 
-    def step(self, k: int, z: Sequence[Mapping[str, Observation | None]]) -> None:
+    def step(self, k: int, z: Sequence[Mapping[str, Statement | None]]) -> None:
         """Step k: ``z[i]`` maps each sensor id of setup i to its z_k (the sources' are read from
         the first)."""
         for link, transfer in self.sources.step(k, z[0]).items():
@@ -378,7 +379,7 @@ class Driver:
         cfg = self.setups[0].cfg
         ids = self.setups[0].source_ids
 
-        def feed(spec: FilterSpec) -> list[Observation]:
+        def feed(spec: FilterSpec) -> list[Statement]:
             if spec.role in ("tl", "robust"):
                 got = (self.channel.receive((source_name(spec, cfg, i), i), k) for i in ids)
                 return [t for t in got if t is not None]

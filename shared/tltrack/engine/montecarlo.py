@@ -25,7 +25,7 @@ from tltrack.config import Config
 from tltrack.engine.driver import Direct, Driver, StepRecord, primary_specs, source_links
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, parse
-from tltrack.engine.scenario import simulate
+from tltrack.engine.scenario import Run, simulate
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.filters import consistency
 from tltrack.filters.base import Estimate, Filter
@@ -219,18 +219,24 @@ def check_filters(cfg: Config, names: Sequence[str]) -> None:
             position_fix(setup.sensor(sid))
 
 
+#: what a sweep's configurations may vary: the primary's sensor alone
+SWEEP_FIELDS = {"primary_intensity", "primary_detection"}
+
+
 def check_sweep(cfgs: Sequence[Config]) -> None:
-    """Refuse configurations that differ in more than the primary's noise intensity.
+    """Refuse configurations that differ in more than the primary's noise intensity and its
+    detection process.
 
     Only then do the sources (and the truths) coincide, so they can be run once for all.
     """
     if not cfgs:
         raise ValueError("a sweep needs at least one configuration")
-    ref = cfgs[0].model_dump(exclude={"primary_intensity"})
+    ref = cfgs[0].model_dump(exclude=SWEEP_FIELDS)
     for c in cfgs[1:]:
-        diff = {k for k, v in c.model_dump(exclude={"primary_intensity"}).items() if ref[k] != v}
+        diff = {k for k, v in c.model_dump(exclude=SWEEP_FIELDS).items() if ref[k] != v}
         if diff:
-            raise ValueError(f"a sweep may vary primary_intensity only; also varied: {diff}")
+            allowed = " and ".join(sorted(SWEEP_FIELDS))
+            raise ValueError(f"a sweep may vary {allowed} only; also varied: {diff}")
 
 
 def run_sweep_batch(
@@ -241,7 +247,8 @@ def run_sweep_batch(
     timing: bool = False,
     keep_tracks: bool = False,
 ) -> list[dict[str, FilterStats]]:
-    """:func:`run_batch` for configurations that differ only in the primary's noise intensity.
+    """:func:`run_batch` for configurations that differ only in the primary's sensor (its noise
+    intensity, its detection process).
 
     The truths, the sources' measurements and so the sources' filters and transfers do not depend
     on the primary's sensor, so each source steps once per k and its transfer feeds the primary of
@@ -264,11 +271,18 @@ def run_sweep_batch(
         driver.step(
             k,
             [
-                {i: s.sensors[i].observe(zi[i][k - 1]) for i in s.sensor_ids}
-                for s, zi in zip(setups, z, strict=True)
+                {i: s.sensors[i].statement(zi[i][k - 1], _scans(sim, i, k)) for i in s.sensor_ids}
+                for s, zi, sim in zip(setups, z, sims, strict=True)
             ],
         )
     return [s.close() for s in scores]
+
+
+def _scans(sims: Sequence[Run], sensor_id: str, k: int) -> list[Array] | None:
+    """Each run's detections of one sensor at step k; None for the paper's sensor."""
+    if sensor_id not in sims[0].scans:
+        return None
+    return [r.scans[sensor_id].detections[k - 1] for r in sims]
 
 
 def own_n_z(setup: Setup) -> Callable[[str], int]:

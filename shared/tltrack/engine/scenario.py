@@ -10,12 +10,14 @@ three readings exist:
 - ``file``: a recorded track (:mod:`tltrack.config.truth_file`), the same for every run.
 
 Measurements and the filters' initial estimate x0_hat ~ N(x0, P0) are fresh per run (the
-cubature-KF benchmark's convention), each from its own stream.
+cubature-KF benchmark's convention), each from its own stream. A sensor that misses the target or
+reports false alarms (:mod:`tltrack.models.detection`) also has scans, drawn from the stream
+``detect/<sensor>`` around the same z_k, so its z_k are those of the clean sensor.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,10 +63,31 @@ def measurements(setup: Setup, run: int, x: Array, sensor_id: str = PRIMARY) -> 
     return s.draw(seen, I_w, g, miscalibration(setup.cfg, sensor_id, s, I_w))
 
 
+def scans(setup: Setup, run: int, x: Array, z: Array, sensor_id: str = PRIMARY) -> Scans | None:
+    """Each step's detections (M_k, n_z) of one sensor, and which are false alarms; None for
+    the paper's sensor (every scan is z_k alone)."""
+    own = setup.sensors[sensor_id]
+    if own.detection.trivial:
+        return None
+    g = stream(setup.cfg.seed, run, f"detect/{sensor_id}")
+    seen = own.detection.inside(own.model.h(observed_truth(setup, sensor_id, x)[1:].T))
+    drawn = [own.detection.scan(z[k], bool(seen[k]), g) for k in range(len(z))]
+    return Scans([d[0] for d in drawn], [d[1] for d in drawn])
+
+
 def initial_estimate(cfg: Config, run: int) -> Array:
     """x0_hat ~ N(x0, P0): every filter of the run starts here, not at the true x0."""
     eps = stream(cfg.seed, run, "init").standard_normal(cfg.n_x)
     return np.asarray(cfg.x0) + np.sqrt(cfg.P0_diag) * eps
+
+
+@dataclass(frozen=True)
+class Scans:
+    """One sensor's scans over a run: per step, the detections (M_k, n_z) and which of them are
+    false alarms (for scoring only: no filter sees it)."""
+
+    detections: list[Array]
+    is_clutter: list[NDArray[np.bool_]]
 
 
 @dataclass(frozen=True)
@@ -73,12 +96,14 @@ class Run:
 
     run: int
     truth: Array  # (K + 1, n_x)
-    z: dict[str, Array]  # sensor id -> (K, n_z)
+    z: dict[str, Array]  # sensor id -> (K, n_z): the target's measurements
     x0_hat: Array  # (n_x,)
+    scans: dict[str, Scans] = field(default_factory=dict)  # the sensors that miss or clutter
 
 
 def simulate(setup: Setup, run: int) -> Run:
-    """The truth, every sensor's measurements and the initial estimate of one run."""
+    """The truth, every sensor's measurements (and scans) and the initial estimate of one run."""
     x = truth(setup, run)
     z = {i: measurements(setup, run, x, i) for i in setup.sensor_ids}
-    return Run(run, x, z, initial_estimate(setup.cfg, run))
+    drawn = {i: scans(setup, run, x, z[i], i) for i in setup.sensor_ids}
+    return Run(run, x, z, initial_estimate(setup.cfg, run), {i: s for i, s in drawn.items() if s})

@@ -17,13 +17,15 @@ from functools import cached_property, lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from tltrack.config import PRIMARY, Config, SensorSpec, position_of
+from tltrack.config import PRIMARY, Config, SensorSpec, detection_of, position_of
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.coordinated_turn import CoordinatedTurn
+from tltrack.models.detection import Detection
 from tltrack.models.kinds import MOTIONS, SENSORS
 from tltrack.models.modes import MotionModes, Straight
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Scan, Statement
 
 Array = NDArray[np.float64]
 
@@ -88,16 +90,28 @@ def intensity(cfg: Config, sensor_id: str = PRIMARY) -> float:
 
 @dataclass(frozen=True)
 class OwnSensor:
-    """An operator's sensor, its full description and its Q_w: what turns its z into an
-    :class:`~tltrack.models.observation.Observation`."""
+    """An operator's sensor, its full description, its Q_w and its detection process: what
+    turns its z into an :class:`~tltrack.models.observation.Observation`, or its scans into a
+    :class:`~tltrack.models.scan.Scan`."""
 
     model: MeasurementModel
     spec: SensorSpec
     R: Array
+    detection: Detection
+    gate_probability: float
 
     def observe(self, z: Array) -> Observation:
         """z_k (n_z,) or a batch's (n_z, B) with the sensor's own Q_w."""
         return Observation.broadcast(self.model, z, self.R)
+
+    def scan(self, scans: list[Array]) -> Scan:
+        """Each run's detections at k, (M_b, n_z), as one scan of the batch."""
+        return Scan.pack(self.model, scans, self.R, self.detection, self.gate_probability)
+
+    def statement(self, z: Array, scans: list[Array] | None) -> Statement:
+        """What the filters take at k: the scans when the sensor misses or has false alarms,
+        else z_k (n_z, B) itself, as the paper's filters take it."""
+        return self.observe(z) if scans is None else self.scan(scans)
 
 
 @dataclass(frozen=True)
@@ -135,7 +149,9 @@ class Setup:
         for sid in self.sensor_ids:
             spec = sensor_spec(self.cfg, sid)
             model = from_spec(spec, self.layout)
-            out[sid] = OwnSensor(model, spec, model.R(intensity(self.cfg, sid)))
+            R = model.R(intensity(self.cfg, sid))
+            detection = detection_of(self.cfg, sid)
+            out[sid] = OwnSensor(model, spec, R, detection, self.cfg.pda_gate_probability)
         return out
 
     def sensor(self, sensor_id: str = PRIMARY) -> MeasurementModel:

@@ -66,6 +66,7 @@ from tltrack.filters.particle_modes import ParticleModes
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.modes import MotionModes
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
 
@@ -97,7 +98,7 @@ class Proposal(Protocol):
     the weights), so any proposal keeps the posterior right. It runs on the generic path.
     """
 
-    def draw(self, apf: AuxiliaryParticleFilter, observations: Sequence[Observation]) -> Draw:
+    def draw(self, apf: AuxiliaryParticleFilter, observations: Sequence[Statement]) -> Draw:
         """The step's draw, from the filter's public pieces (anchors, first_stage, ...)."""
 
 
@@ -214,7 +215,7 @@ class AuxiliaryParticleFilter:
             self._next, self._gathered = self.modes.switch(self.modes.of), None
         self._pending, self._preview, self._means, self._moments = True, None, None, None
 
-    def update(self, observations: Sequence[Observation]) -> None:
+    def update(self, observations: Sequence[Statement]) -> None:
         """The two stages on every statement of the step (eqs. in the module docstring)."""
         if not self._pending:
             raise RuntimeError("update() needs predict() first")
@@ -304,7 +305,7 @@ class AuxiliaryParticleFilter:
         auxiliary.first_stage(self._logw, look_ahead, beta, u, self._anc, np.empty(N), ok, ess)
         return np.where(ok[:, None], self._anc, self._identity), ok
 
-    def look_ahead(self, m: Array, observations: Sequence[Observation]) -> Array:
+    def look_ahead(self, m: Array, observations: Sequence[Statement]) -> Array:
         """log l_k(m_i): the step's likelihood at points ``m`` (n_x, B, N)."""
         return self._look_ahead(m, observations)
 
@@ -319,7 +320,7 @@ class AuxiliaryParticleFilter:
         view.flags.writeable = False
         return view
 
-    def _look_ahead(self, m: Array, observations: Sequence[Observation]) -> Array:
+    def _look_ahead(self, m: Array, observations: Sequence[Statement]) -> Array:
         """log l_k(m_i), the first stage's look-ahead."""
         la = np.empty(self._logw.shape)
         self._likelihood.into(m, observations, la)

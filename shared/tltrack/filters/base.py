@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
 
@@ -29,7 +30,7 @@ class Filter(Protocol):
     def predict(self) -> None:
         """Advance the prior from k-1 to k."""
 
-    def update(self, observations: Sequence[Observation]) -> None:
+    def update(self, observations: Sequence[Statement]) -> None:
         """Condition on every Gaussian statement about h(x_k) in the list."""
 
     def estimate(self) -> Estimate:

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from tltrack.filters.base import Estimate
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
 
@@ -43,7 +44,7 @@ class GaussianFilter(Protocol):
 
     def predict(self) -> None: ...
 
-    def update(self, observations: Sequence[Observation]) -> None: ...
+    def update(self, observations: Sequence[Statement]) -> None: ...
 
     def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation: ...
 
@@ -83,7 +84,7 @@ class InteractingMultipleModel:
             f.predict()
         self.mu = c
 
-    def update(self, observations: Sequence[Observation]) -> None:
+    def update(self, observations: Sequence[Statement]) -> None:
         """Each filter updates; the modes are weighed by their likelihoods (step 3)."""
         for f in self.filters:
             f.update(observations)

@@ -14,8 +14,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.filters import fastpath
+from tltrack.filters.association import scan_loglik
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Scan
 
 Array = NDArray[np.float64]
 
@@ -46,17 +48,20 @@ class Likelihood:
         return self._kernels[type(sensor)]
 
     def split(
-        self, observations: Sequence[Observation], x: Array
-    ) -> tuple[tuple[fastpath.SensorKernels, list[Observation]] | None, list[Observation]]:
+        self, observations: Sequence[Observation | Scan], x: Array
+    ) -> tuple[tuple[fastpath.SensorKernels, list[Observation]] | None, list[Observation | Scan]]:
         """The statements one compiled kernel takes (the first sensor type that has one, in one
-        layout), and the others (generic path). A cloud a kernel cannot read takes NumPy."""
+        layout), and the others (generic path, and every scan). A cloud a kernel cannot read
+        takes NumPy."""
         if not (x.dtype == np.float64 and x.flags.c_contiguous):
             return None, list(observations)
         fast: list[Observation] = []
-        others: list[Observation] = []
+        others: list[Observation | Scan] = []
         kernels = None
         for o in observations:
-            if not fast and (k := self.kernels(o.sensor)) is not None:
+            if isinstance(o, Scan):
+                others.append(o)
+            elif not fast and (k := self.kernels(o.sensor)) is not None:
                 kernels = k
                 fast.append(o)
             elif fast and type(o.sensor) is type(fast[0].sensor) and _same_layout(o, fast[0]):
@@ -65,7 +70,7 @@ class Likelihood:
                 others.append(o)
         return (None if kernels is None else (kernels, fast)), others
 
-    def into(self, x: Array, observations: Sequence[Observation], out: Array) -> None:
+    def into(self, x: Array, observations: Sequence[Observation | Scan], out: Array) -> None:
         """out (B, N) = the sum of every statement's log-likelihood over the clouds x."""
         fast, others = self.split(observations, x)
         if fast is not None:
@@ -73,7 +78,7 @@ class Likelihood:
         else:
             out[...] = 0.0
         for o in others:
-            out += gaussian_loglik(o, x)
+            out += scan_loglik(o, x) if isinstance(o, Scan) else gaussian_loglik(o, x)
 
 
 def _same_layout(a: Observation, b: Observation) -> bool:

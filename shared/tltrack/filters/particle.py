@@ -41,6 +41,7 @@ from tltrack.filters.particle_modes import ParticleModes
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.modes import MotionModes
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
 
@@ -216,17 +217,17 @@ class ParticleFilter:
             self._propagate(src, anc, U, out, b)
         self.x = out
 
-    def _loglik_into(self, observations: Sequence[Observation], logw: Array) -> None:
+    def _loglik_into(self, observations: Sequence[Statement], logw: Array) -> None:
         """Write the sum of every observation's log-likelihood into ``logw`` (B, N)."""
         self._likelihood.into(self._cloud(), observations, logw)
 
-    def log_weights(self, observations: Sequence[Observation]) -> Array:
+    def log_weights(self, observations: Sequence[Statement]) -> Array:
         """Unnormalised log-weights (B, N): the sum of every observation's log-likelihood."""
         logw = np.empty((self.batch, self.N))
         self._loglik_into(observations, logw)
         return logw
 
-    def update(self, observations: Sequence[Observation]) -> None:
+    def update(self, observations: Sequence[Statement]) -> None:
         """Weight, normalise and resample (Algorithm 2, lines 3-9).
 
         A run whose weights are not finite (NaN particles) gets a NaN cloud, so it reads as lost.

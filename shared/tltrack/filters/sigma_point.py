@@ -4,7 +4,9 @@ A rule approximates E[g(x)], x ~ N(m, P), by sum_s w_s g(m + L xi_s) with L L' =
 baselines TL-UKF and TL-CKF (Alotaibi et al. 2024) condition on the primary's z_k and the source's
 eta_hat_k at once. Both are Gaussian statements about h(x_k) with independent errors, so they stack
 into one measurement [z; eta; ...] with noise blockdiag(Q_w, P_eta_eta, ...): one Kalman update then
-serves the isolated, TL, multi-source and centralized-fusion filters alike.
+serves the isolated, TL, multi-source and centralized-fusion filters alike. A scan with false
+alarms and missed detections is then taken by probabilistic data association
+(:mod:`~tltrack.filters.association`).
 
 Angles: a bearing mean is ref + sum_s w_s wrap(Z_s - ref), with ref the bearing of the mean state.
 Unlike a circular mean, that is right for the 5th-degree rule's negative weights, and it holds
@@ -27,9 +29,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.declare import Parameter
+from tltrack.filters.association import associate
 from tltrack.filters.base import Estimate
 from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Scan, Statement
 
 Array = NDArray[np.float64]
 
@@ -188,16 +192,22 @@ class SigmaPointFilter:
         D = Xp - self.m[..., None]
         self._set_cov(runs, _wcov(D, D, w) + self.model.Q)
 
-    def update(self, observations: Sequence[Observation]) -> None:
-        """One stacked Kalman update per run on the observations whose mask includes it.
+    def update(self, observations: Sequence[Statement]) -> None:
+        """One stacked Kalman update per run on the Gaussian statements whose mask includes it,
+        then one association per scan.
 
-        Runs are grouped by which observations apply to them, so a masked-out observation is
-        absent from that run's update, exactly.
+        Runs are grouped by which statements apply to them, so a masked-out statement is absent
+        from that run's update, exactly.
         """
+        self.loglik = np.zeros(self.m.shape[1])
+        gaussian = [o for o in observations if isinstance(o, Observation)]
+        if gaussian:
+            self._update_gaussian(gaussian)
+        for scan in (o for o in observations if isinstance(o, Scan)):
+            self._associate(scan)  # after the transfers: its gate is the sharper prior's
+
+    def _update_gaussian(self, observations: Sequence[Observation]) -> None:
         B = self.m.shape[1]
-        self.loglik = np.zeros(B)
-        if not observations:
-            return
         active = np.array([np.ones(B, bool) if o.mask is None else o.mask for o in observations])
         patterns, group = np.unique(active.T, axis=0, return_inverse=True)
         group = group.ravel()
@@ -225,6 +235,23 @@ class SigmaPointFilter:
         self.loglik[runs] = -0.5 * (d2 + logdet + nu.shape[0] * np.log(2.0 * np.pi))
         self.m[:, runs] += np.einsum("bij,jb->ib", K, nu)
         self._set_cov(runs, self.P[runs] - K @ Pzz @ K.swapaxes(-1, -2))
+
+    def _associate(self, scan: Scan) -> None:
+        """Probabilistic data association of one scan (Bar-Shalom, Daum & Huang 2009, eqs.
+        37-44): m += K nu, P -= (1 - beta_0) K S K' - K (sum_j beta_j nu_j nu_j' - nu nu') K'."""
+        runs = np.arange(self.m.shape[1])
+        w = self.rule.w
+        X, dX = self._points(runs)
+        s = scan.sensor
+        zhat, dZ = _moments(s, s.h(X), s.h(self.m), w)
+        S, _ = _make_pd(_wcov(dZ, dZ, w) + scan.cov)
+        K = np.linalg.solve(S, _wcov(dX, dZ, w).swapaxes(-1, -2)).swapaxes(-1, -2)
+        a = associate(scan, Observation(s, zhat, S))
+        Kt = K.swapaxes(-1, -2)
+        self.m += np.einsum("bij,jb->ib", K, a.innovation)
+        P = self.P - (1.0 - a.beta0)[:, None, None] * (K @ S @ Kt) + K @ a.spread @ Kt
+        self._set_cov(runs, P)
+        self.loglik += a.loglik
 
     def estimate(self) -> Estimate:
         """The Gaussian posterior itself: its mean and covariance."""

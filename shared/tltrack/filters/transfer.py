@@ -10,6 +10,10 @@ whose ``k_apply`` is k. With no transfer it is the isolated filter.
 
 A live tracker can miss a measurement (a partition, a lost packet): ``z=None`` then means a
 prediction-only step, so the filter stays on the clock instead of waiting forever.
+
+The own measurement may be a scan with false alarms (:class:`~tltrack.models.scan.Scan`): the
+filter takes it whole, and the NIS, the robust policy and the lost-track recovery read the scan's
+PDA-combined measurement and its likeliest detection (:mod:`~tltrack.filters.association`).
 """
 
 from __future__ import annotations
@@ -20,11 +24,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.filters.association import associate, combined, likeliest
 from tltrack.filters.base import Array, Estimate, Filter
 from tltrack.filters.consistency import nis
 from tltrack.filters.decision import TransferPolicy
 from tltrack.models.base import MeasurementModel
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Scan, Statement
 
 #: Reinitialises the lost runs of a filter around a measurement; returns which runs it did (see
 #: tltrack.filters.recovery).
@@ -45,15 +51,17 @@ class Source:
         self.nis: Array | None = None  #: per run, of the last step's z_k (None: no z_k)
         self._upcoming: Observation | None = None  #: the last transfer: its z_k's prediction
 
-    def step(self, z: Observation | None) -> tuple[Estimate, Observation]:
+    def step(self, z: Statement | None) -> tuple[Estimate, Observation]:
         if self._upcoming is None:
             self.filter.predict()
             self._upcoming = self.filter.predicted_observation(self.sensor, self.R)
         self.recovered = None
-        self.nis = None if z is None else nis(z, self._upcoming)
+        self.nis = None
         if z is not None:
+            own = Own(z, self._upcoming)
+            self.nis = own.nis
             if self.recover is not None:
-                self.recovered = self.recover(self.filter, z)
+                self.recovered = self.recover(self.filter, own.anchor)
             self.filter.update([z])
         est = self.filter.estimate()
         self.filter.predict()
@@ -89,18 +97,20 @@ class Primary:
         self.nis: Array | None = None  #: per run, of the last step's own z_k (None: no z_k)
         self.twin_estimate: Estimate | None = None
 
-    def step(self, z: Observation | None, transfers: Sequence[Observation] = ()) -> Estimate:
+    def step(self, z: Statement | None, transfers: Sequence[Statement] = ()) -> Estimate:
         if self.twin is not None:
             self.twin_estimate = self.twin.step(z)
         self.filter.predict()
-        self.nis = None if z is None else nis(z, self.filter.predicted_observation(z.sensor, z.cov))
+        own = None if z is None else Own(z, self.filter.predicted_observation(z.sensor, z.cov))
+        self.nis = None if own is None else own.nis
         self.recovered = None
-        if self.recover is not None and z is not None:
-            self.recovered = self.recover(self.filter, z)
+        if self.recover is not None and own is not None:
+            self.recovered = self.recover(self.filter, own.anchor)
         if self.policy is not None and transfers:
-            transfers = self.policy.select(z, transfers)
+            judged = [t for t in transfers if isinstance(t, Observation)]  # transfers: Gaussian
+            transfers = self.policy.select(None if own is None else own.statement, judged)
         self.used = _any_applied(transfers)
-        observations = [*([z] if z is not None else []), *transfers]
+        observations: list[Statement] = [*([z] if z is not None else []), *transfers]
         if observations:
             self.filter.update(observations)
         self.rolled_back = None
@@ -111,11 +121,29 @@ class Primary:
         return self.filter.estimate()
 
 
-def _any_applied(transfers: Sequence[Observation]) -> NDArray[np.bool_] | None:
+class Own:
+    """What a role reads of its own measurement z_k given its prediction N(z_hat, S): the NIS,
+    the statement the robust policy judges transfers against, and the anchor a recovery redraws
+    around. For a plain measurement, z itself; for a scan, its PDA-combined measurement (the
+    prediction itself where no detection is in the gate, and then no NIS) and its likeliest
+    detection."""
+
+    def __init__(self, z: Statement, predicted: Observation) -> None:
+        if isinstance(z, Scan):
+            a = associate(z, predicted)
+            self.statement = combined(z, predicted, a)
+            self.anchor = likeliest(z, a)
+            self.nis = np.where(a.any, nis(self.statement, predicted), np.nan)
+        else:
+            self.statement = self.anchor = z
+            self.nis = nis(z, predicted)
+
+
+def _any_applied(transfers: Sequence[Statement]) -> NDArray[np.bool_] | None:
     """Per run: did at least one transfer apply? None when there were none at all."""
     if not transfers:
         return None
-    B = transfers[0].mean.shape[1]
+    B = transfers[0].cov.shape[0]
     used = np.zeros(B, dtype=bool)
     for t in transfers:
         used |= np.ones(B, dtype=bool) if t.mask is None else t.mask

@@ -29,6 +29,7 @@ from tltrack.live.held import Handling, Held
 from tltrack.live.service import Service
 from tltrack.models.base import Layout, PositionFix
 from tltrack.models.observation import Observation
+from tltrack.models.scan import Statement
 from tltrack.wire.messages import (
     EpisodeEnd,
     EpisodeStart,
@@ -226,8 +227,8 @@ class PrimaryEpisode:
     def _step(self, name: str, z: Measurement | None, extra: list[Observation]) -> Estimate:
         self._k[name] += 1
 
-        def feed(spec: FilterSpec) -> list[Observation]:
-            return extra if spec.role in ("tl", "robust") else []
+        def feed(spec: FilterSpec) -> list[Statement]:
+            return list(extra) if spec.role in ("tl", "robust") else []
 
         return self._half.step(self._k[name], self._observe(z), feed, only=[name])[name]
 
