@@ -7,7 +7,6 @@ import math
 
 import numpy as np
 import pytest
-
 from tltrack.config import ConfigError, make_config
 from tltrack.engine.montecarlo import run_batch
 from tltrack.engine.scenario import simulate
@@ -44,7 +43,9 @@ def test_a_bad_detection_process_is_refused_naming_the_field(given: dict, says: 
 
 
 def test_a_sensor_without_field_of_view_bounds_refuses_false_alarms() -> None:
-    with pytest.raises(ValueError, match="clutter_rate > 0 needs a field of view: give fov.tof_s"):
+    with pytest.raises(
+        ValueError, match=r"needs a field of view: give fov\.tof_s"
+    ):
         Detection(("tof_s",), clutter_rate=1.0)
     assert Detection(("tof_s",), pd=0.5).density == 0.0  # misses alone need no bounds
     assert Detection(("tof_s",), clutter_rate=1.0, fov={"tof_s": (0.0, 2.0)}).density == 0.5
