@@ -43,9 +43,7 @@ def test_a_bad_detection_process_is_refused_naming_the_field(given: dict, says: 
 
 
 def test_a_sensor_without_field_of_view_bounds_refuses_false_alarms() -> None:
-    with pytest.raises(
-        ValueError, match=r"needs a field of view: give fov\.tof_s"
-    ):
+    with pytest.raises(ValueError, match=r"needs a field of view: give fov\.tof_s"):
         Detection(("tof_s",), clutter_rate=1.0)
     assert Detection(("tof_s",), pd=0.5).density == 0.0  # misses alone need no bounds
     assert Detection(("tof_s",), clutter_rate=1.0, fov={"tof_s": (0.0, 2.0)}).density == 0.5
