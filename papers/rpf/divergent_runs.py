@@ -1,9 +1,9 @@
 """Are a Monte-Carlo table's divergent runs the filter's design or too few particles? Reruns the
 runs of a ``results.json`` whose run RMSE passes ``--over`` metres for any of ``--filters`` (or
 the runs named by ``--runs``, in the setting the flags name), each at every particle count of
-``--particles``, and prints each filter's run RMSE and final error per run (the engine's per-run
-streams make the first count reproduce the table's own figures). ``--rerun`` reruns other
-filters than ``--filters`` on those runs (another proposal, ``proposals.py``).
+``--particles``, and prints each filter's run RMSE and the least error of its last 10 steps per
+run (the engine's per-run streams make the first count reproduce the table's own figures).
+``--rerun`` reruns other filters than ``--filters`` on those runs (another proposal, ``proposals.py``).
 
 A committed ``results.json`` has no ``run_rmse`` (papers/strip_runs.py): the per-run arrays are
 read from ``results.full.json`` beside it, which ``scripts/long_runs.sh`` leaves there, or
@@ -82,10 +82,10 @@ def main() -> None:
     everyone = rerun + [n for n in args.compare.split(",") if n]
     for N in (int(p) for p in args.particles.split(",")):
         stats = run_batch(cfg.with_(particles=N), everyone, runs)
-        print(f"N = {N}, run RMSE / final error [m] of runs {runs}:")
+        print(f"N = {N}, run RMSE / least error of the last 10 steps [m] of runs {runs}:")
         width = max(14, *map(len, stats))
         for n, s in stats.items():
-            rmse, final = np.sqrt(np.ravel(s.run_mse)), np.ravel(s.final_err)
+            rmse, final = np.sqrt(np.ravel(s.run_mse)), np.ravel(s.tail_err)
             print(
                 f"  {n:{width}s} "
                 + " ".join(f"{r:5.0f}/{f:<5.0f}" for r, f in zip(rmse, final, strict=True))

@@ -341,7 +341,7 @@ class Config(BaseModel):
         100.0,
         gt=0,
         allow_inf_nan=False,
-        description="a run whose final error passes this is lost",
+        description="a run whose error stays above this through its last 10 steps is lost",
         json_schema_extra=unit("m"),
     )
     gate_probability: float = Field(

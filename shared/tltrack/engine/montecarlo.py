@@ -7,7 +7,9 @@ not grow with the run count. Every random number comes from a per-(seed, run, pu
 the result is the same whatever the batch size or worker count.
 
 The overall RMSE is the paper's: the mean over k of sqrt(mean over runs of the squared position
-error). Lost runs count (no filter is ever reinitialised here).
+error). Lost runs count (no filter is ever reinitialised here). A run is *lost* when its position
+error stays above ``lost_threshold_m`` through each of its last ``LOST_STEPS`` steps: it has
+diverged, not merely ended on one bad step.
 """
 
 from __future__ import annotations
@@ -36,6 +38,9 @@ from tltrack.models.base import Layout
 
 Array = NDArray[np.float64]
 
+#: a run is lost when its error passes the threshold in each of its last LOST_STEPS steps
+LOST_STEPS = 10
+
 
 @dataclass
 class FilterStats:
@@ -46,7 +51,8 @@ class FilterStats:
     nees: Array = field(init=False)  # (K,) sum over runs of the NEES
     nees_singular: int = 0  # run-steps whose covariance was singular
     run_mse: list[Array] = field(default_factory=list)  # per run: mean over k of squared error
-    final_err: list[Array] = field(default_factory=list)  # per run: position error at k = K
+    #: per run: the smallest position error over the last LOST_STEPS steps (NaN if any is NaN)
+    tail_err: list[Array] = field(default_factory=list)
     step_ms: list[float] = field(default_factory=list)
     transfer_steps: int = 0  # run-steps whose update used at least one transfer
     regularised: int = 0  # run-steps whose cloud an rpf redrew from its kernel
@@ -67,7 +73,7 @@ class FilterStats:
         self.nees += other.nees
         self.nees_singular += other.nees_singular
         self.run_mse += other.run_mse
-        self.final_err += other.final_err
+        self.tail_err += other.tail_err
         self.step_ms += other.step_ms
         self.transfer_steps += other.transfer_steps
         self.regularised += other.regularised
@@ -150,7 +156,7 @@ class _Score:
         if self._means is not None:
             self.stats.tracks.append(np.stack(self._means))
         self.stats.run_mse.append(sq.mean(axis=0))
-        self.stats.final_err.append(np.sqrt(sq[-1]))
+        self.stats.tail_err.append(np.sqrt(sq[-LOST_STEPS:].min(axis=0)))
         return self.stats
 
 
@@ -333,13 +339,13 @@ class FilterResult:
     @classmethod
     def from_stats(cls, s: FilterStats, runs: int, lost_threshold: float) -> FilterResult:
         rmse_k = np.sqrt(s.sq_err / runs)
-        final = np.concatenate(s.final_err)
+        tail = np.concatenate(s.tail_err)
         above = s.above_band / s.windows if s.windows else 0.0
         below = s.below_band / s.windows if s.windows else 0.0
         return cls(
             rmse_per_step=rmse_k.tolist(),
             rmse_overall=float(rmse_k.mean()),
-            lost_fraction=float(np.mean(~(final <= lost_threshold))),  # NaN counts as lost
+            lost_fraction=float(np.mean(~(tail <= lost_threshold))),  # NaN counts as lost
             nees=float(s.nees.sum() / (runs * s.K)),
             nees_singular_rate=s.nees_singular / (runs * s.K),
             ms_per_step=float(np.median(s.step_ms)) if s.step_ms else None,

@@ -38,8 +38,8 @@ def presets(setting: Setting, runner: Runner, out: Path, *, truth_seeds: int = 5
         "# Every preset and truth mode",
         "",
         f"{setting.describe(cfg).split(', ', 2)[2]}; truth seeds 0..{truth_seeds - 1} for the "
-        "fixed truth. Lost: final error over 100 m. Differences: means over runs of the paired "
-        "per-run overall RMSE difference, MC error (2 x SE) in brackets.",
+        "fixed truth. Lost: error over 100 m in each of the last 10 steps. Differences: means over "
+        "runs of the paired per-run overall RMSE difference, MC error (2 x SE) in brackets.",
         "",
         row(["preset truth [seed]", *(f"lost {n}" for n in lost_names)]),
         row(["---"] * (1 + len(lost_names))),

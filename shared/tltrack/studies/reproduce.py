@@ -368,7 +368,7 @@ def lost_by_job_section(f: Results) -> list[str]:
     """The share of lost runs of every filter in every job."""
     names = ALL_FILTERS
     lines = [
-        "## Share of runs that lost track (final error > threshold)",
+        "## Share of runs that lost track (error > threshold in each of the last 10 steps)",
         "",
         _row(["job", *names]),
         _row(["---"] * (1 + len(names))),
