@@ -3,7 +3,8 @@ runs of a ``results.json`` whose run RMSE passes ``--over`` metres for any of ``
 the runs named by ``--runs``, in the setting the flags name), each at every particle count of
 ``--particles``, and prints each filter's run RMSE and the least error of its last 10 steps per
 run (the engine's per-run streams make the first count reproduce the table's own figures).
-``--rerun`` reruns other filters than ``--filters`` on those runs (another proposal, ``proposals.py``).
+``--rerun`` reruns other filters than ``--filters`` on those runs (another proposal,
+``proposals.py``).
 
 A committed ``results.json`` has no ``run_rmse`` (papers/strip_runs.py): the per-run arrays are
 read from ``results.full.json`` beside it, which ``scripts/long_runs.sh`` leaves there, or
