@@ -198,3 +198,15 @@ def test_every_filter_and_role_runs_on_cluttered_scans_with_finite_estimates() -
     for name, s in out.items():
         assert np.isfinite(s.sq_err).all(), name
         assert s.nis_count > 0, name
+
+
+def test_the_cli_sets_each_operators_detection_over_the_config_files(tmp_path) -> None:
+    from tltrack.app.common import build_config
+
+    toml = tmp_path / "c.toml"
+    toml.write_text("primary_detection = {pd = 0.8, fov = {range_m = [0.0, 5000.0]}}\n")
+    cfg = build_config(toml, clutter_rate=3.0, source_pd=0.95)
+    assert cfg.primary_detection is not None and cfg.primary_detection.pd == 0.8
+    assert cfg.primary_detection.clutter_rate == 3.0
+    assert cfg.primary_detection.fov == {"range_m": (0.0, 5000.0)}
+    assert all(s.detection is not None and s.detection.pd == 0.95 for s in cfg.sources)

@@ -13,7 +13,7 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from tltrack.config import Config, ConfigError
+from tltrack.config import Config, ConfigError, DetectionSpec
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -82,6 +82,8 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
     sources = overrides.pop("sources", None)
     fault = overrides.pop("source_fault", None)
     source_filter = overrides.pop("source_filter", None)
+    detection = {k: overrides.pop(k, None) for k in ("pd", "clutter_rate")}
+    source_detection = {k: overrides.pop(f"source_{k}", None) for k in ("pd", "clutter_rate")}
     try:
         if sources is not None and source_intensity is not None:
             raise ConfigError("--sources: give either --sources or --source-intensity, not both")
@@ -98,9 +100,33 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
                 sources=[{**s.model_dump(), "filter": source_filter} for s in cfg.sources],
                 trusted_changes=True,
             )
+        cfg = _with_detection(cfg, detection, source_detection)
     except ValueError as err:  # a ConfigError, or a truth file refused
         console.print(f"[red]error:[/red] invalid configuration: {err}")
         raise typer.Exit(2) from None
+    return cfg
+
+
+def _with_detection(
+    cfg: Config, primary: dict[str, float | None], sources: dict[str, float | None]
+) -> Config:
+    """``--pd``/``--clutter-rate`` into the primary's detection process, ``--source-pd``/
+    ``--source-clutter-rate`` into every source's, over what the config file gave."""
+
+    def merged(given: DetectionSpec | None, flags: dict[str, float | None]) -> dict[str, Any]:
+        return {
+            **(given.model_dump() if given else {}),
+            **{k: v for k, v in flags.items() if v is not None},
+        }
+
+    if any(v is not None for v in primary.values()):
+        cfg = cfg.with_(primary_detection=merged(cfg.primary_detection, primary))
+    if any(v is not None for v in sources.values()):
+        cfg = cfg.with_(
+            sources=[
+                {**s.model_dump(), "detection": merged(s.detection, sources)} for s in cfg.sources
+            ]
+        )
     return cfg
 
 

@@ -23,7 +23,9 @@ from tltrack.app.common import (
     epilog="Examples:\n\n"
     "    tltrack experiment --scenario ct --preset arasaratnam-haykin --truth noise-free "
     "--filters pf,tl-pf --particles 6000 --runs 200 --primary-intensity 4 --seed 1 --out /tmp/e\n\n"
-    "    tltrack experiment --config my.toml --filters ukf,tl-ukf --out out/ukf"
+    "    tltrack experiment --config my.toml --filters ukf,tl-ukf --out out/ukf\n\n"
+    "    tltrack experiment --preset arasaratnam-haykin --pd 0.9 --clutter-rate 20 "
+    "--filters rpf,tl-rpf,ukf,tl-ukf --runs 20 --out /tmp/clutter"
 )
 def experiment(
     scenario: Annotated[
@@ -54,6 +56,18 @@ def experiment(
         float | None, typer.Option(help="robust-tl-*: at most this share of steps with a transfer")
     ] = None,
     primary_intensity: Annotated[float | None, typer.Option(help="I_w of the primary")] = None,
+    pd: Annotated[
+        float | None, typer.Option(help="the primary's probability of detection, in (0, 1]")
+    ] = None,
+    clutter_rate: Annotated[
+        float | None, typer.Option(help="the primary's mean false alarms per scan (Poisson)")
+    ] = None,
+    source_pd: Annotated[
+        float | None, typer.Option(help="every source's probability of detection")
+    ] = None,
+    source_clutter_rate: Annotated[
+        float | None, typer.Option(help="every source's mean false alarms per scan")
+    ] = None,
     truth: Annotated[str | None, typer.Option(help="fixed, random or noise-free")] = None,
     seed: Annotated[int | None, typer.Option(help="master seed of every random stream")] = None,
     truth_seed: Annotated[int | None, typer.Option(help="seed of the fixed truth")] = None,
@@ -90,6 +104,10 @@ def experiment(
         runs=runs,
         source_intensity=source_intensity,
         primary_intensity=primary_intensity,
+        pd=pd,
+        clutter_rate=clutter_rate,
+        source_pd=source_pd,
+        source_clutter_rate=source_clutter_rate,
         truth=truth,
         seed=seed,
         truth_seed=truth_seed,
