@@ -61,13 +61,11 @@ def _log_pd(pd_x: Array) -> Array:
 
 def _gaussian_logpdf(nu: Array, cov: Array) -> Array:
     """log N(nu; 0, cov) for innovations nu (n_z, B, ...) and covariances cov (B, n_z, n_z)."""
-    n_z = nu.shape[0]
-    L = np.linalg.cholesky(cov)
-    flat = nu.reshape(n_z, nu.shape[1], -1).transpose(1, 0, 2)  # (B, n_z, P)
-    y = np.linalg.solve(L, flat)
-    q = (y * y).sum(axis=1).reshape(nu.shape[1:])
-    logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(axis=1)
-    shape = (nu.shape[1],) + (1,) * (nu.ndim - 2)
+    n_z, B = nu.shape[:2]
+    shape = (B,) + (1,) * (nu.ndim - 2)
+    Ri = np.linalg.inv(cov)
+    q = sum(Ri[:, i, j].reshape(shape) * nu[i] * nu[j] for i in range(n_z) for j in range(n_z))
+    logdet = np.linalg.slogdet(cov)[1]
     return np.asarray(-0.5 * (q + (logdet + n_z * np.log(2.0 * np.pi)).reshape(shape)))
 
 
