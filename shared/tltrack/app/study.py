@@ -25,14 +25,15 @@ from tltrack.app.common import (
     "    tltrack study robust --kind rpf --source-filter pf --preset paper --truth fixed\n\n"
     "    tltrack study heterogeneous --runs 200\n\n"
     "    tltrack study realizations --realizations 100 --runs 50 --preset paper\n\n"
-    "    tltrack study manoeuvres --runs 200"
+    "    tltrack study manoeuvres --runs 200\n\n"
+    "    tltrack study clutter --runs 200"
 )
 def study(
     name: Annotated[
         str,
         typer.Argument(
-            help="robust, sources, budget, heterogeneous, presets, intensities, realizations "
-            "or manoeuvres"
+            help="robust, sources, budget, heterogeneous, presets, intensities, realizations, "
+            "manoeuvres or clutter"
         ),
     ],
     runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
@@ -79,6 +80,7 @@ def study(
         "presets": studies.presets,
         "intensities": studies.intensities,
         "manoeuvres": functools.partial(studies.manoeuvres, tracks=tracks),
+        "clutter": studies.clutter,
     }
     known = [*by_name, "realizations"]
     problems = [
@@ -91,7 +93,11 @@ def study(
         console.print(f"[red]error:[/red] {'; '.join(p for p in problems if p)}")
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
-    configurations = {"realizations": realizations, "manoeuvres": studies.MANOEUVRE_CONFIGS}
+    configurations = {
+        "realizations": realizations,
+        "manoeuvres": studies.MANOEUVRE_CONFIGS,
+        "clutter": studies.CLUTTER_SWEEPS,
+    }
     total = runs * configurations.get(name, 1)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=total if name in configurations else None)

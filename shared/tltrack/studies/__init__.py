@@ -7,13 +7,16 @@
 - :mod:`~.presets`: lost tracks and the paired claims in every preset and truth mode;
 - :mod:`~.intensities`: TL against isolated at every primary intensity;
 - :mod:`~.realizations`: the paper's trajectory as a measured distribution;
-- :mod:`~.manoeuvres`: one motion model against a target class's modes, on manoeuvring targets.
+- :mod:`~.manoeuvres`: one motion model against a target class's modes, on manoeuvring targets;
+- :mod:`~.clutter`: the lost share against the false alarms in the gate, at several pd.
 
 :mod:`~.common` holds what they share: a :class:`~.common.Setting` (runs, seed, filter kind,
 base configuration), a :class:`~.common.Runner` (how the engine runs) and paired differences.
 """
 
 from tltrack.studies.budget import budget
+from tltrack.studies.clutter import SWEEPS as CLUTTER_SWEEPS
+from tltrack.studies.clutter import clutter
 from tltrack.studies.common import Runner, Setting
 from tltrack.studies.heterogeneous import heterogeneous
 from tltrack.studies.intensities import intensities
@@ -25,10 +28,12 @@ from tltrack.studies.robust import robust
 from tltrack.studies.sources import sources
 
 __all__ = [
+    "CLUTTER_SWEEPS",
     "MANOEUVRE_CONFIGS",
     "Runner",
     "Setting",
     "budget",
+    "clutter",
     "heterogeneous",
     "intensities",
     "manoeuvres",
