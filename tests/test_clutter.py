@@ -11,7 +11,7 @@ from tltrack.config import ConfigError, make_config
 from tltrack.engine.montecarlo import run_batch
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import Setup
-from tltrack.filters.association import associate, scan_loglik
+from tltrack.filters.association import CLOUD_GATE_SIGMAS, associate, scan_loglik
 from tltrack.filters.likelihood import gaussian_loglik
 from tltrack.filters.sigma_point import UnscentedKalmanFilter, unscented
 from tltrack.models.detection import Detection
@@ -210,3 +210,48 @@ def test_the_cli_sets_each_operators_detection_over_the_config_files(tmp_path) -
     assert cfg.primary_detection.clutter_rate == 3.0
     assert cfg.primary_detection.fov == {"range_m": (0.0, 5000.0)}
     assert all(s.detection is not None and s.detection.pd == 0.95 for s in cfg.sources)
+
+
+def _brute(sensor, R, detection, Z: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """log(lambda (1 - pd(x)) + pd(x) sum_j N(z_j; h(x), R)) over every detection, (N,)."""
+    Zx = sensor.h(x)  # (n_z, N)
+    nu = sensor.residual(Z.T[:, None, :], Zx[:, :, None])  # (n_z, N, M)
+    q = np.einsum("inm,ij,jnm->nm", nu, np.linalg.inv(R), nu)
+    g = np.exp(-0.5 * q) / np.sqrt(np.linalg.det(2 * math.pi * R))
+    pd = detection.pd_at(Zx)
+    return np.log(detection.density * (1 - pd) + pd * g.sum(axis=1))
+
+
+@pytest.mark.parametrize(
+    ("kind", "params", "centre", "spread"),
+    [
+        ("bearing", {"sigma_bearing": 0.01}, [-4000.0, 10.0], 300.0),  # a cloud across +-pi
+        ("range-bearing", {}, [-3000.0, -5.0], 2000.0),  # a cloud round the sensor
+        ("range-bearing-doppler", {}, [3000.0, 200.0], 50.0),  # three components
+        ("position", {"sigma_pos": 5.0}, [100.0, 100.0], 40.0),
+    ],
+)
+def test_the_grid_finds_every_detection_that_matters(kind, params, centre, spread) -> None:
+    cfg = make_config(scenario="cv", primary_sensor={"kind": kind, **params})
+    setup = Setup(cfg)
+    own = setup.sensors["primary"]
+    g = np.random.default_rng(11)
+    N = 400
+    x = np.zeros((4, 1, N))
+    x[0, 0] = centre[0] + spread * g.standard_normal(N)
+    x[2, 0] = centre[1] + spread * g.standard_normal(N)
+    x[1, 0], x[3, 0] = 30.0, -20.0
+    d = Detection(own.model.components, pd=0.8, clutter_rate=500.0)
+    bounds = d.bounds
+    Z = np.column_stack([g.uniform(*bounds[c], 500) for c in own.model.components])
+    hits = (
+        own.model.h(x[:, 0, :40]).T
+        + g.standard_normal((40, own.model.n_z)) @ np.linalg.cholesky(own.R).T
+    )
+    Z = np.vstack([Z, own.model.residual(hits.T, np.zeros((own.model.n_z, 1))).T])
+    got = scan_loglik(Scan.pack(own.model, [Z], own.R, d), x)[0]
+    # each term left out is under exp(-CLOUD_GATE_SIGMAS^2 / 2) of a hit's peak
+    peak = d.pd / np.sqrt(np.linalg.det(2 * math.pi * own.R))
+    bound = len(Z) * peak * math.exp(-(CLOUD_GATE_SIGMAS**2) / 2)
+    assert np.abs(np.exp(got) - np.exp(_brute(own.model, own.R, d, Z, x[:, 0, :]))).max() < bound
+    assert np.isfinite(got).all()

@@ -10,11 +10,12 @@ scan's likelihood, up to a factor that does not depend on x, is
 through by lambda_c). Written so, it needs no division and holds at lambda_c = 0: one detection
 and pd = 1 give g(z | x), the paper's likelihood.
 
-- Particle filters (:func:`scan_loglik`) weigh every particle by it. The scan is gated once per
-  cloud: a detection farther than ``CLOUD_GATE_SIGMAS`` noise standard deviations, in any
-  component, from every particle's predicted measurement adds less than exp(-CLOUD_GATE_SIGMAS^2
-  / 2) of a hit to any particle's sum and is left out, so P_G = 1 and a scan of thousands of
-  detections costs about what the few near the cloud cost.
+- Particle filters (:func:`scan_loglik`) weigh every particle by it. A detection farther than
+  ``CLOUD_GATE_SIGMAS`` noise standard deviations, in any component, from a particle's predicted
+  measurement adds less than exp(-CLOUD_GATE_SIGMAS^2 / 2) of a hit to that particle's sum and is
+  left out of it, so P_G = 1. The scan is gated once per cloud, by the cloud's extent; then each
+  particle reads the detections near it through a grid (:mod:`tltrack.filters.kernels.scan`), so
+  a scan of thousands of detections costs little more than the few near each particle.
 - Gaussian filters (:func:`associate`) use probabilistic data association (Bar-Shalom & Tse
   1975; Bar-Shalom, Daum & Huang 2009, eqs. 37-44): the detections inside the gate
   nu' S^-1 nu <= chi2_{n_z}(P_G) of the predicted measurement N(z_hat, S) each get a probability
@@ -32,6 +33,7 @@ from numpy.typing import NDArray
 from scipy.special import logsumexp
 from scipy.stats import chi2
 
+from tltrack.filters.kernels import scan as kernel
 from tltrack.models.observation import Observation
 from tltrack.models.scan import Scan
 
@@ -87,21 +89,50 @@ def scan_loglik(scan: Scan, x: Array) -> Array:
     s = scan.sensor
     Zx = s.h(x)  # (n_z, B, N)
     ref = s.mean(Zx, axis=2)  # (n_z, B)
+    Ux = s.residual(Zx, ref[:, :, None])  # measurements relative to the cloud's centre
+    Uz = s.residual(scan.z, ref[:, :, None])
     with np.errstate(invalid="ignore"):
-        extent = np.nanmax(np.abs(s.residual(Zx, ref[:, :, None])), axis=2, initial=0.0)
-    sigma = np.sqrt(np.diagonal(scan.cov, axis1=1, axis2=2)).T  # (n_z, B)
-    half = extent + CLOUD_GATE_SIGMAS * sigma
-    near = scan.valid & (np.abs(s.residual(scan.z, ref[:, :, None])) <= half[:, :, None]).all(0)
-    Zg, vg = _compact(scan, near)
+        extent = np.nanmax(np.abs(Ux), axis=2, initial=0.0)  # (n_z, B)
+    half = CLOUD_GATE_SIGMAS * np.sqrt(np.diagonal(scan.cov, axis1=1, axis2=2)).T  # (n_z, B)
+    near = scan.valid & (np.abs(Uz) <= (extent + half)[:, :, None]).all(axis=0)
     pd_x = scan.detection.pd_at(Zx)  # (B, N)
     out = _log_clutter(scan, pd_x, 1.0)
-    if vg.shape[1]:
-        nu = s.residual(Zg[:, :, None, :], Zx[:, :, :, None])  # (n_z, B, N, M')
-        lg = np.where(vg[:, None, :], _gaussian_logpdf(nu, scan.cov), -np.inf)
-        out = np.logaddexp(out, _log_pd(pd_x) + logsumexp(lg, axis=2))
+    if near.any():
+        hits = _hits_by_grid(scan, Zx, near, half)
+        if hits is None:  # every particle against every detection near the cloud
+            Zg, vg = _compact(scan, near)
+            nu = s.residual(Zg[:, :, None, :], Zx[:, :, :, None])  # (n_z, B, N, M')
+            lg = np.where(vg[:, None, :], _gaussian_logpdf(nu, scan.cov), -np.inf)
+            hits = logsumexp(lg, axis=2)
+        out = np.logaddexp(out, _log_pd(pd_x) + hits)
     dead = ~np.isfinite(out).any(axis=1) | (False if scan.mask is None else ~scan.mask)
     out[dead] = 0.0
     return np.asarray(out)
+
+
+def _hits_by_grid(scan: Scan, Zx: Array, near: NDArray[np.bool_], half: Array) -> Array | None:
+    """log sum_j g(z_j | x) (B, N) over the detections within ``half`` of each particle, through
+    the grid kernel (:mod:`tltrack.filters.kernels.scan`); None for a sensor that does not
+    declare which components are angles (``angular``), whose residuals the kernel cannot know."""
+    angular = getattr(scan.sensor, "angular", None)
+    if angular is None:
+        return None
+    is_angle = np.asarray(angular, dtype=np.bool_)
+    B, N = Zx.shape[1:]
+    out = np.empty((B, N))
+    Ri = np.linalg.inv(scan.cov)
+    lognorm = -0.5 * (np.linalg.slogdet(scan.cov)[1] + scan.sensor.n_z * np.log(2.0 * np.pi))
+    for b in range(B):
+        kernel.near_loglik(
+            np.ascontiguousarray(Zx[:, b, :]),
+            np.ascontiguousarray(scan.z[:, b, near[b]]),
+            is_angle,
+            np.ascontiguousarray(Ri[b]),
+            np.ascontiguousarray(half[:, b]),
+            lognorm[b],
+            out[b],
+        )
+    return out
 
 
 @dataclass(frozen=True)

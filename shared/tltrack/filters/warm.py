@@ -6,7 +6,7 @@ import numpy as np
 
 from tltrack.filters import fastpath
 from tltrack.filters.auxiliary import AuxiliaryParticleFilter
-from tltrack.filters.kernels import propagation
+from tltrack.filters.kernels import propagation, scan
 from tltrack.filters.kernels.gaussians import uniforms_per_run
 from tltrack.filters.kernels.moments import spread_coordinates
 from tltrack.filters.particle import ParticleFilter
@@ -39,6 +39,9 @@ def warm_up() -> None:
             _ = pf.x
             pf.gaussians()
     _warm_modes()
+    for n_z in (1, 2, 3):  # the dense scans' grid, for each layout of its loop
+        x = np.zeros((n_z, 2))
+        scan.near_loglik(x, x, np.zeros(n_z, bool), np.eye(n_z), np.ones(n_z), 0.0, np.empty(2))
     systematic_indices(np.full((1, 4), 0.25), rngs)
     spread_coordinates(np.eye(5)[None], 1e-10)  # the Monte-Carlo engine's NEES
 
