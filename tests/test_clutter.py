@@ -255,3 +255,18 @@ def test_the_grid_finds_every_detection_that_matters(kind, params, centre, sprea
     bound = len(Z) * peak * math.exp(-(CLOUD_GATE_SIGMAS**2) / 2)
     assert np.abs(np.exp(got) - np.exp(_brute(own.model, own.R, d, Z, x[:, 0, :]))).max() < bound
     assert np.isfinite(got).all()
+
+
+def test_the_clutter_example_puts_a_fifth_of_a_false_alarm_in_the_gate() -> None:
+    """docs/howto/clutter.md's figure for examples/clutter.toml."""
+    from pathlib import Path
+
+    from scipy.stats import chi2
+    from tltrack.config import load_config
+
+    cfg = load_config(Path(__file__).parents[1] / "examples" / "clutter.toml")
+    own = Setup(cfg).sensors["primary"]
+    gate = math.pi * chi2.ppf(0.99, 2) * math.sqrt(np.linalg.det(own.R))
+    assert own.detection.clutter_rate * gate / own.detection.volume == pytest.approx(0.2, abs=0.01)
+    assert own.detection.pd == 0.9
+    assert Setup(cfg).sensors["s1"].detection.pd == 0.95
