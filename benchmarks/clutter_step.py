@@ -1,109 +1,17 @@
 """A particle filter's step on a scan of 1000 detections against its clean step, side by side.
 
-Both filters (``rpf`` and ``pf``, each clean and in clutter) filter one run (B = 1) of Scenario 2
-under the paper preset with N particles, through the step driver. At every step the cluttered one
-gets a scan of the target's measurement (pd = 1) plus 999 false alarms uniform in a field of view
-centred on the target's noise-free measurement, sized so that the mean number of false alarms in
-the 99% gate of the sensor's noise is ``--in-gate`` (issue 32: 2): the field of view follows the
-target, so that it stays inside the view of a scan this dense. The steps alternate (clean,
-cluttered, clean, ...) at every k, so load hits both alike; the figures are medians over every
-step of every repeat and their ratio (issue 32 asks for <= 2 at N = 6000), with each filter's
-RMSE over the timed steps.
-
-With Stone Soup installed (``pip install -e .[bench]``), its expected-likelihood particle filter
-(``SingleTargetExpectedLikelihoodParticleFilter`` with a ``PDAHypothesiser``, its
-``ConstantTurn`` model and the same N) runs the first ``--stonesoup-steps`` scans of the last
-repeat (it is slow), beside ours on the same scans.
-
     .venv/bin/python benchmarks/clutter_step.py [--particles 6000] [--repeats 3] [--json FILE]
+
+The same as ``tltrack bench --clutter``: see :mod:`tltrack.perf.clutter`.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
-import time
 from pathlib import Path
 
-import numpy as np
-from scipy.stats import chi2
-from tltrack.config import make_config
-from tltrack.engine.driver import Primaries
-from tltrack.engine.registry import parse
-from tltrack.engine.scenario import simulate
-from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.models.detection import Detection
-from tltrack.models.scan import Scan
-
-
-def stonesoup_elpf(setup: Setup, x0_hat: np.ndarray, N: int, density: float, seed: int):  # type: ignore[no-untyped-def]
-    """Stone Soup's ELPF on the primary's radar, as a function of (k, scan (M, 2)) -> estimate
-    (n_x,); None without Stone Soup."""
-    try:
-        from stonesoup.dataassociator.probability import PDA
-        from stonesoup.deleter import Deleter
-        from stonesoup.hypothesiser.probability import PDAHypothesiser
-        from stonesoup.initiator import Initiator
-        from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
-        from stonesoup.models.transition.nonlinear import ConstantTurn
-        from stonesoup.predictor.particle import ParticlePredictor
-        from stonesoup.tracker.particle import SingleTargetExpectedLikelihoodParticleFilter
-        from stonesoup.types.array import StateVector, StateVectors
-        from stonesoup.types.detection import Detection as SSDetection
-        from stonesoup.types.state import ParticleState
-        from stonesoup.types.track import Track
-        from stonesoup.updater.particle import ParticleUpdater
-    except ImportError:
-        return None
-    import datetime
-
-    np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
-    cfg, own = setup.cfg, setup.sensors[PRIMARY]
-    meas = CartesianToBearingRange(
-        ndim_state=5,
-        mapping=(0, 2),
-        noise_covar=np.diag([own.R[1, 1], own.R[0, 0]]),  # [bearing, range]
-        translation_offset=StateVector(list(own.model.position)),
-    )
-    predictor = ParticlePredictor(
-        ConstantTurn(linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2)
-    )
-    updater = ParticleUpdater(meas, resampler=None)
-    t0 = datetime.datetime(2025, 1, 1)
-    sd0 = np.sqrt(np.asarray(cfg.P0_diag))[:, None]
-    particles = x0_hat[:, None] + sd0 * np.random.standard_normal((len(x0_hat), N))
-    start = ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)), timestamp=t0)
-
-    class Given(Initiator):  # type: ignore[misc]
-        def initiate(self, detections, timestamp, **kwargs):  # type: ignore[no-untyped-def]
-            return {Track([start])}
-
-    class Never(Deleter):  # type: ignore[misc]
-        def check_for_deletion(self, track, **kwargs):  # type: ignore[no-untyped-def]
-            return False
-
-    scans: list = []
-    hyp = PDAHypothesiser(predictor, updater, density, prob_detect=1.0, prob_gate=0.99)
-    tracker = SingleTargetExpectedLikelihoodParticleFilter(
-        initiator=Given(),
-        deleter=Never(),
-        detector=scans,
-        data_associator=PDA(hyp),
-        updater=updater,
-    )
-    scans.append((t0, set()))  # the first call initiates the track at t0
-    steps = iter(tracker)
-    next(steps)
-
-    def step(k: int, Z: np.ndarray) -> np.ndarray:
-        t = t0 + datetime.timedelta(seconds=k * cfg.Ts)
-        dets = {SSDetection(StateVector([b, r]), timestamp=t, measurement_model=meas) for r, b in Z}
-        scans.append((t, dets))
-        _, tracks = next(steps)
-        return np.asarray(next(iter(tracks)).state.mean, dtype=float).ravel()
-
-    return step
+from tltrack.perf.clutter import format_clutter_table, run_clutter_bench
 
 
 def main() -> None:
@@ -116,72 +24,10 @@ def main() -> None:
     ap.add_argument("--stonesoup-steps", type=int, default=10)
     ap.add_argument("--json", type=Path)
     a = ap.parse_args()
-    names = ("rpf", "pf")
-    ms: dict[str, list[float]] = {f"{n}{c}": [] for n in names for c in ("", " in clutter")}
-    sq: dict[str, list[float]] = {k: [] for k in ms}  # squared position errors, timed steps
-    early: dict[str, list[float]] = {}  # the same over the steps Stone Soup runs
-    for rep in range(a.repeats + 1):  # the first pass compiles and warms up, untimed
-        setup = Setup(make_config(particles=a.particles, K=a.steps, seed=rep))
-        sim = simulate(setup, 0)
-        own = setup.sensors[PRIMARY]
-        sr, sb = np.sqrt(np.diag(own.R))
-        # V / V_gate = (clutter per scan) / (clutter in the gate); the box keeps R's aspect
-        gate = math.pi * chi2.ppf(0.99, 2) * sr * sb
-        half = math.sqrt((a.detections - 1) * gate / a.in_gate / 4.0) / math.sqrt(sr * sb)
-        rng = np.random.default_rng(rep)
-        x0 = sim.x0_hat[:, None]
-        clean = Primaries(setup, [parse(n) for n in names], x0, [0])
-        dirty = Primaries(setup, [parse(n) for n in names], x0, [0])
-        last = rep == a.repeats
-        ss = None
-        if last and a.stonesoup_steps > 0:
-            volume = (2 * half * sr) * (2 * half * sb)
-            ss = stonesoup_elpf(setup, sim.x0_hat, a.particles, (a.detections - 1) / volume, rep)
-            if ss is not None:
-                ms["stonesoup elpf"], sq["stonesoup elpf"] = [], []
-        for k in range(1, a.steps + 1):
-            centre = own.model.h(sim.truth[k][:, None])[:, 0]
-            lo, hi = centre - half * np.array([sr, sb]), centre + half * np.array([sr, sb])
-            fov = {"range_m": (lo[0], hi[0]), "bearing_rad": (lo[1], hi[1])}
-            d = Detection(own.model.components, 1.0, a.detections - 1.0, fov)
-            Z = np.vstack([sim.z[PRIMARY][k - 1], rng.uniform(lo, hi, (a.detections - 1, 2))])
-            scan = Scan.pack(own.model, [rng.permutation(Z)], own.R, d)
-            z = own.observe(sim.z[PRIMARY][k - 1])
-            truth = sim.truth[k][[0, 2]]
-            for n in names:
-                for half_, stmt, label in ((clean, z, n), (dirty, scan, f"{n} in clutter")):
-                    t0 = time.perf_counter()
-                    est = half_.step(k, stmt, lambda _s: [], [n])[n].mean[0]
-                    if rep:
-                        ms[label].append((time.perf_counter() - t0) * 1e3)
-                        e2 = float(np.sum((est[[0, 2]] - truth) ** 2))
-                        sq[label].append(e2)
-                        if last and ss is not None and k <= a.stonesoup_steps:
-                            early.setdefault(label, []).append(e2)
-            if ss is not None and k <= a.stonesoup_steps:
-                t0 = time.perf_counter()
-                est = ss(k, scan.z[:, 0, :].T)
-                ms["stonesoup elpf"].append((time.perf_counter() - t0) * 1e3)
-                e2 = float(np.sum((est[[0, 2]] - truth) ** 2))
-                sq["stonesoup elpf"].append(e2)
-                early.setdefault("stonesoup elpf", []).append(e2)
-    med = {k: float(np.median(v)) for k, v in ms.items()}
-    out = {
-        "particles": a.particles,
-        "detections_per_scan": a.detections,
-        "false_alarms_in_gate": a.in_gate,
-        "steps_timed": len(ms["rpf"]),
-        "median_ms": med,
-        "ratio": {n: med[f"{n} in clutter"] / med[n] for n in names},
-        "rmse_m": {k: float(np.sqrt(np.mean(v))) for k, v in sq.items() if v},
-        "first_steps": len(early.get("stonesoup elpf", [])),
-        "rmse_first_steps_m": {k: float(np.sqrt(np.mean(v))) for k, v in early.items()},
-    }
-    if "stonesoup elpf" in med:
-        out["stonesoup_over_ours"] = {
-            n: med["stonesoup elpf"] / med[f"{n} in clutter"] for n in names
-        }
-    print(json.dumps(out, indent=2))
+    out = run_clutter_bench(
+        a.particles, a.repeats, a.steps, a.detections, a.in_gate, a.stonesoup_steps
+    )
+    print(format_clutter_table(out))
     if a.json:
         a.json.write_text(json.dumps(out, indent=2) + "\n")
 

@@ -123,6 +123,20 @@ def test_the_bench_times_every_row_side_by_side(tmp_path):
     assert set(doc["rpf_over_pf"]) == {"", "tl-", "source-"}
 
 
+def test_the_clutter_bench_times_each_filter_clean_and_on_dense_scans(tmp_path):
+    """What it measures, not how fast: both filters, clean and in clutter, with their RMSE."""
+    out = tmp_path / "bench.json"
+    args = ["bench", "--clutter", "--particles", "200", "--repeats", "1", "--steps", "4"]
+    r = CliRunner().invoke(app, [*args, "--json", str(out)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    timed = {n: v for n, v in doc["median_ms"].items() if n != "stonesoup elpf"}
+    assert set(timed) == {"rpf", "pf", "rpf in clutter", "pf in clutter"}
+    assert all(v > 0 for v in timed.values()) and set(doc["ratio"]) == {"rpf", "pf"}
+    assert all(v >= 0 for v in doc["rmse_m"].values())
+    assert doc["steps_timed"] == 4 and doc["detections_per_scan"] == 1000
+
+
 def test_the_results_table_marks_a_nees_over_a_singular_covariance(capsys):
     row = {
         "rmse_overall": 20.0,

@@ -71,16 +71,30 @@ def bench_live(
 def bench(
     particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
     repeats: Annotated[int, typer.Option(help="passes over the K steps")] = 3,
+    clutter: Annotated[
+        bool,
+        typer.Option(
+            help="instead: rpf and pf on scans of 1000 detections against their clean step"
+        ),
+    ] = False,
+    steps: Annotated[int, typer.Option(help="--clutter: steps per pass")] = 100,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
 ) -> None:
     """Time one filter step (tl-pf, pf, source-pf) against plain NumPy and Stone Soup, side by side.
 
-    Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `bench` extra)
+    Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `bench` extra);
+    `tltrack bench --clutter` (tltrack.perf.clutter)
     """
-    from tltrack.perf.bench import format_table, run_bench
+    if clutter:
+        from tltrack.perf.clutter import format_clutter_table, run_clutter_bench
 
-    result = run_bench(particles=particles, repeats=repeats)
-    console.print(format_table(result))
+        result = run_clutter_bench(particles=particles, repeats=repeats, steps=steps)
+        console.print(format_clutter_table(result))
+    else:
+        from tltrack.perf.bench import format_table, run_bench
+
+        result = run_bench(particles=particles, repeats=repeats)
+        console.print(format_table(result))
     if json_out:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(result, indent=1))
