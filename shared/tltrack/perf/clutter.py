@@ -3,10 +3,11 @@ clean step, side by side.
 
 Both filters (``rpf`` and ``pf``, each clean and in clutter) filter one run (B = 1) of Scenario 2
 under the paper preset with N particles, through the step driver. At every step the cluttered one
-gets a scan of the target's measurement (pd = 1) plus 999 false alarms uniform in a box centred on the target's noise-free measurement, sized so that the mean number of false
-alarms in the 99% gate of the sensor's noise is ``--in-gate`` (issue 32: 2). The filters are told
-that density over the sensor's whole default field of view (false alarms far from the target
-change no likelihood, only the scan's size), so the box follows the target at no cost to it.
+gets a scan of the target's measurement (pd = 1) plus 999 false alarms uniform in a box centred
+on the target's noise-free measurement, sized so that the mean number of false alarms in the 99%
+gate of the sensor's noise is ``--in-gate`` (issue 32: 2). The filters are told that density
+over the sensor's whole default field of view (false alarms far from the target change no
+likelihood, only the scan's size), so the box follows the target at no cost to it.
 The steps alternate (clean, cluttered, clean, ...) at every k, so load hits both alike; the
 figures are medians over every step of every repeat and their ratio (issue 32 asks for <= 2 at
 N = 6000), with each filter's RMSE over the timed steps.
