@@ -204,7 +204,8 @@ def main(argv: list[str] | None = None) -> None:
     setup_logging(settings.log_level)
     try:
         cfg = settings.load_config()
-    except ValueError as err:  # a ConfigError, or a truth file refused
+        Setup(cfg).check_live()
+    except ValueError as err:  # a ConfigError, a truth file refused, or clutter
         log.error("invalid configuration: %s", err)
         raise SystemExit(2) from None
     with Service(NAME, keys.REFEREE, settings.zenoh) as svc:

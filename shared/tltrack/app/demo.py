@@ -59,6 +59,7 @@ def demo(
     access control, from the operator manifest; every service runs as its operator. Any stop
     signal (or the death of this process) stops every process it started.
     """
+    from tltrack.engine.setup import Setup
     from tltrack.live import supervisor as d
 
     if config is None:
@@ -66,8 +67,9 @@ def demo(
         steps, particles, seed = steps or 100, particles or 6000, seed or 0
     cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
     try:
+        Setup(cfg).check_live()
         d.check_access(manifest_or_exit(manifest), cfg)
-    except d.AccessControlMissingError as err:
+    except (ValueError, d.AccessControlMissingError) as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)

@@ -160,6 +160,17 @@ class Setup:
     def intensity(self, sensor_id: str = PRIMARY) -> float:
         return intensity(self.cfg, sensor_id)
 
+    def check_live(self) -> None:
+        """Refuse, with a ValueError that says why, what the live services cannot carry yet:
+        a sensor that misses or reports false alarms (their messages hold one z_k per step)."""
+        detecting = [i for i in self.sensor_ids if not self.sensors[i].detection.trivial]
+        if detecting:
+            raise ValueError(
+                f"the detection process of {', '.join(detecting)} (pd, clutter_rate, fov) runs "
+                "in the engine only (tltrack experiment, tltrack study clutter): the live "
+                "services' measurement messages carry one z_k per step"
+            )
+
     @cached_property
     def P0(self) -> Array:
         return np.diag(self.cfg.P0_diag)
