@@ -12,6 +12,7 @@ import pytest
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.studies import Runner, Setting
 from tltrack.studies.clutter import (
+    MARGIN_SIGMAS,
     clutter,
     configs,
     density_at,
@@ -40,7 +41,8 @@ def test_the_field_of_view_holds_every_noise_free_measurement_with_its_margin() 
     z = setup.sensor(PRIMARY).h(truth(setup, 0)[1:].T)
     assert setup.sensors[PRIMARY].detection.inside(z).all()
     lo, hi = fov["range_m"]
-    assert lo == pytest.approx(z[0].min() - 200.0) and hi == pytest.approx(z[0].max() + 200.0)
+    margin = MARGIN_SIGMAS * math.sqrt(setup.sensors[PRIMARY].R[0, 0])  # sigma_r = 20 m
+    assert lo == pytest.approx(z[0].min() - margin) and hi == pytest.approx(z[0].max() + margin)
 
 
 @pytest.mark.parametrize("per_gate", [0.5, 4.0])

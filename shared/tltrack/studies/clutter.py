@@ -55,8 +55,10 @@ SOURCE_PER_GATE = 0.05
 SOURCE_PD = 0.95
 #: the gate's probability: the clutter is counted in this gate of the sensor's own noise
 GATE_PROBABILITY = 0.99
-#: the field of view's margin beyond the truth's measurements, in noise standard deviations
-MARGIN_SIGMAS = 10.0
+#: the field of view's margin beyond the truth's measurements, in noise standard deviations: far
+#: enough that no cloud near the target meets the edge, beyond which a particle explains every
+#: detection as clutter (at 10, the edge trapped clouds in a turn: papers/clutter/README.md)
+MARGIN_SIGMAS = 50.0
 #: the lost share whose density the headline reports
 LOST_LEVEL = 0.05
 FILTERS = ("rpf", "tl-rpf", "robust-tl-rpf", "fusion-rpf", "ukf", "tl-ukf")
