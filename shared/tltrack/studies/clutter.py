@@ -50,8 +50,9 @@ Array = NDArray[np.float64]
 DENSITIES = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0)
 #: the primary's probabilities of detection
 PDS = (1.0, 0.9, 0.7)
-#: the source's light clutter
+#: the source's light clutter, false alarms per scan inside its gate
 SOURCE_PER_GATE = 0.05
+#: the source's probability of detection
 SOURCE_PD = 0.95
 #: the gate's probability: the clutter is counted in this gate of the sensor's own noise
 GATE_PROBABILITY = 0.99
