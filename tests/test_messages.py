@@ -511,3 +511,14 @@ def test_reject_counter_is_thread_safe_and_bounded() -> None:
     assert sum(rc.by_key().values()) == 16_000
     assert sum(rc.by_reason().values()) == 16_000
     assert len(rc.by_key()) <= 11 and RejectCounter.OTHER in rc.by_key()
+
+
+def test_the_wire_imports_no_statistics_library() -> None:
+    """Every service and every container's health check imports the wire; scipy.stats alone
+    costs seconds on a loaded machine, past the health check's timeout (compose.yaml)."""
+    import subprocess
+    import sys
+
+    code = "import sys, tltrack.wire.transport; print('scipy.stats' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

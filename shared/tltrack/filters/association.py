@@ -30,8 +30,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import logsumexp
-from scipy.stats import chi2
 
 from tltrack.filters.kernels import scan as kernel
 from tltrack.models.observation import Observation
@@ -47,7 +45,17 @@ CLOUD_GATE_SIGMAS = 6.0
 @functools.cache
 def gate_threshold(probability: float, n_z: int) -> float:
     """gamma with P(chi2_{n_z} <= gamma) = probability."""
+    from scipy.stats import chi2  # on first use: every service imports this module, few gate
+
     return float(chi2.ppf(probability, n_z))
+
+
+def logsumexp(a: Array, axis: int) -> Array:
+    """log sum exp(a) along ``axis``, -inf where every term is -inf."""
+    top = np.max(a, axis=axis, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore"):
+        return np.asarray(np.log(np.sum(np.exp(a - top), axis=axis)) + np.squeeze(top, axis))
 
 
 def _log_clutter(scan: Scan, pd_x: Array, P_G: float) -> Array:
