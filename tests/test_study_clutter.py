@@ -12,6 +12,7 @@ import pytest
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.studies import Runner, Setting
 from tltrack.studies.clutter import (
+    FILTERS,
     MARGIN_SIGMAS,
     clutter,
     configs,
@@ -93,19 +94,5 @@ def test_a_tiny_study_writes_its_table_numbers_and_plot(tmp_path: Path) -> None:
     assert set(cells) == {"pd 0.9 | 0", "pd 0.9 | 2"}
     assert cells["pd 0.9 | 0"]["measured_per_gate"] == 0.0
     assert abs(cells["pd 0.9 | 2"]["measured_per_gate"] - 2.0) <= 4 * math.sqrt(2.0 / 24)
-    assert set(cells["pd 0.9 | 2"]["filters"]) >= {
-        "rpf",
-        "tl-rpf",
-        "robust-tl-rpf",
-        "fusion-rpf",
-        "ukf",
-        "tl-ukf",
-    }
-    assert set(data["lost_5pct_density"]["0.9"]) == {
-        "rpf",
-        "tl-rpf",
-        "robust-tl-rpf",
-        "fusion-rpf",
-        "ukf",
-        "tl-ukf",
-    }
+    assert set(cells["pd 0.9 | 2"]["filters"]) >= set(FILTERS)
+    assert set(data["lost_5pct_density"]["0.9"]) == set(FILTERS)
