@@ -11,7 +11,7 @@ from tltrack.config import ConfigError, make_config
 from tltrack.engine.montecarlo import run_batch
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import Setup
-from tltrack.filters.association import CLOUD_GATE_SIGMAS, associate, scan_loglik
+from tltrack.filters.association import CLOUD_GATE_SIGMAS, associate, gate_volume, scan_loglik
 from tltrack.filters.likelihood import gaussian_loglik
 from tltrack.filters.sigma_point import UnscentedKalmanFilter, unscented
 from tltrack.models.detection import Detection
@@ -256,12 +256,11 @@ def test_the_clutter_example_puts_a_fifth_of_a_false_alarm_in_the_gate() -> None
     """docs/howto/clutter.md's figure for examples/clutter.toml."""
     from pathlib import Path
 
-    from scipy.stats import chi2
     from tltrack.config import load_config
 
     cfg = load_config(Path(__file__).parents[1] / "examples" / "clutter.toml")
     own = Setup(cfg).sensors["primary"]
-    gate = math.pi * chi2.ppf(0.99, 2) * math.sqrt(np.linalg.det(own.R))
+    gate = gate_volume(own.R)
     assert own.detection.clutter_rate * gate / own.detection.volume == pytest.approx(0.2, abs=0.01)
     assert own.detection.pd == 0.9
     assert Setup(cfg).sensors["s1"].detection.pd == 0.95

@@ -26,6 +26,7 @@ and pd = 1 give g(z | x), the paper's likelihood.
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,6 +49,15 @@ def gate_threshold(probability: float, n_z: int) -> float:
     from scipy.stats import chi2  # on first use: every service imports this module, few gate
 
     return float(chi2.ppf(probability, n_z))
+
+
+def gate_volume(R: Array, probability: float = 0.99) -> float:
+    """The volume of {nu : nu' R^-1 nu <= chi2_{n_z}(probability)}: an ellipsoid of radius
+    sqrt(gamma) in R's metric (pi gamma sqrt(det R) for n_z = 2)."""
+    n = R.shape[0]
+    gamma = gate_threshold(probability, n)
+    unit_ball = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
+    return float(unit_ball * gamma ** (n / 2) * math.sqrt(np.linalg.det(R)))
 
 
 def logsumexp(a: Array, axis: int) -> Array:

@@ -28,12 +28,12 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 from tltrack.config import make_config
 from tltrack.engine.driver import Primaries
 from tltrack.engine.registry import parse
 from tltrack.engine.scenario import simulate
 from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.filters.association import gate_volume
 from tltrack.models.detection import Detection
 from tltrack.models.scan import Scan
 
@@ -129,7 +129,7 @@ def run_clutter_bench(
         own = setup.sensors[PRIMARY]
         sr, sb = np.sqrt(np.diag(own.R))
         # V / V_gate = (clutter per scan) / (clutter in the gate); the box keeps R's aspect
-        gate = math.pi * chi2.ppf(0.99, 2) * sr * sb
+        gate = gate_volume(own.R)
         half = math.sqrt((detections - 1) * gate / in_gate / 4.0) / math.sqrt(sr * sb)
         rng = np.random.default_rng(rep)
         # what the filters are told: that density over the sensor's whole (default) field of

@@ -41,7 +41,7 @@ from tltrack.config import Config
 from tltrack.engine.montecarlo import run_sweep
 from tltrack.engine.scenario import simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.filters.association import gate_threshold
+from tltrack.filters.association import gate_threshold, gate_volume
 from tltrack.studies.common import Results, Runner, Setting, plain, row, write
 
 Array = NDArray[np.float64]
@@ -65,15 +65,6 @@ LOST_LEVEL = 0.05
 FILTERS = ("rpf", "tl-rpf", "robust-tl-rpf", "fusion-rpf", "ukf", "tl-ukf")
 #: sweeps the study runs (one per pd), for a progress bar
 SWEEPS = len(PDS)
-
-
-def gate_volume(R: Array, probability: float = GATE_PROBABILITY) -> float:
-    """The volume of {nu : nu' R^-1 nu <= chi2_{n_z}(probability)}: an ellipsoid of radius
-    sqrt(gamma) in R's metric (pi gamma sqrt(det R) for n_z = 2)."""
-    n = R.shape[0]
-    gamma = gate_threshold(probability, n)
-    unit_ball = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
-    return float(unit_ball * gamma ** (n / 2) * math.sqrt(np.linalg.det(R)))
 
 
 def _arc(angles: Array) -> tuple[float, float]:
