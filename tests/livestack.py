@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import signal
 import sqlite3
 import time
 from collections.abc import Iterator, Sequence
@@ -78,6 +79,19 @@ def wait_until(pred: Any, timeout: float, every: float = 0.2) -> bool:
             return True
         time.sleep(every)
     return False
+
+
+def end_episode_once(s: supervisor.Stack, seen: Any, timeout: float) -> bool:
+    """Stop sensor_sim (SIGTERM: it ends its episode as ``aborted``, with the steps it sent) once
+    ``seen()`` holds, or after ``timeout``; whether ``seen()`` held.
+
+    A fault test's episode is long enough for the slowest machine's recovery, and ends as soon as
+    the test has seen the steps after it that it asserts on: the recovery's time, not the episode's
+    length, decides what is left to judge."""
+    held = wait_until(seen, timeout)
+    if s.procs["sensor_sim"].poll() is None:
+        s.kill("sensor_sim", signal.SIGTERM)
+    return held
 
 
 #: the share of due steps that must use the transfer: a transfer later than the primary's

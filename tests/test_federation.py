@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from livestack import estimates, logs, mostly_used, sim_flags, wait_until
+from livestack import end_episode_once, estimates, logs, mostly_used, sim_flags, wait_until
 from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
 from tltrack.config import Config, make_config
@@ -178,6 +178,12 @@ def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything
 
 
 FAULT_K = 200
+#: an episode that outlasts the slowest recovery seen (a restarted router and its services'
+#: reconnection took 10 s on a loaded machine); it ends once the test has seen the steps after it
+RECOVERY_K = 1000
+#: the steps the primary takes after the fault is over before the episode ends: its reconnection
+#: first, then 21 judged steps
+AFTER = 60
 
 
 def _transfer_use(db: Path) -> dict[int, bool]:
@@ -196,9 +202,8 @@ def test_faults_between_routers(tmp_path, fault):
     the primary's router (its services reconnect), or stop the source's router for good (the
     primary carries on alone); asserted on the scorer's record."""
     db = tmp_path / "scorer.sqlite"
-    # a restarted router and its services' reconnection took 10 s on a loaded machine: the
-    # episode outlasts that by as much again, so that the tail asserts on resumed steps
-    K = 2 * FAULT_K if fault == "primary-router-restarts" else FAULT_K
+    recovers = fault != "source-router-gone"
+    K = RECOVERY_K if recovers else FAULT_K
     with federation(tmp_path) as (s, relays):
         s.start_router()
         # The primary's router still knows the source's router, through the referee's (the
@@ -220,22 +225,26 @@ def test_faults_between_routers(tmp_path, fault):
         elif fault == "primary-router-restarts":
             s.start_operator_router("primary")
         back = max(_transfer_use(db), default=hit)
+        if recovers:
+            seen = end_episode_once(s, lambda: _reached(db, back + AFTER), 60)
+            assert seen, f"the primary took no {AFTER} steps after the fault\n" + logs(s)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
     used = _transfer_use(db)
-    before = [used[k] for k in range(2, hit - 1)]
+    # from step 4: a tracker's first steps are its kernels' first calls, late on a loaded machine
+    before = [used[k] for k in range(4, hit - 1)]
     assert mostly_used(before), f"transfer unused before the fault: {before}"
     during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
     if fault == "primary-router-restarts":  # its sensor had no clock: gaps, not estimates
         assert not during, "the primary stepped while its router was down"
     else:
         assert during and not any(during), "transfer used while the source was out of reach"
-    tail = [used.get(k, False) for k in range(K - 20, K + 1)]
+    last = max(used)
+    tail = [used.get(k, False) for k in range(last - 20, last + 1)]
     if fault == "source-router-gone":
         assert sorted(used) == list(range(1, K + 1)), "the primary missed steps"
         assert not any(tail), "transfer after the source's router went away"
     else:
-        assert back < K - 25, "the fault outlasted the episode"
         assert mostly_used(tail), f"transfer did not resume: {tail}"
 
 
