@@ -35,6 +35,7 @@ import numpy as np
 import pytest
 import yaml
 import zenoh
+from batch import BELOW
 from livestack import wait_until
 from relay import captured, found, sentinels
 from tltrack.config import make_config
@@ -186,7 +187,7 @@ def image(compose: list[str]) -> str:
             print(f"reusing {IMAGE} ({current[:19]}): sources unchanged since it was built")
             return IMAGE
         t0 = time.monotonic()
-        _run([str(ROOT / "scripts" / "build_image.sh")], timeout=1500)
+        _run([*BELOW, str(ROOT / "scripts" / "build_image.sh")], timeout=1500)
         print(f"built {IMAGE} in {time.monotonic() - t0:.0f} s")
         built = _image_id()
         assert built is not None, f"scripts/build_image.sh left no {IMAGE}"

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
+from batch import BELOW
 
 T = TypeVar("T", bound=Callable[..., Any])
 
@@ -71,7 +72,7 @@ def build(tmp_path_factory: pytest.TempPathFactory) -> Build:
         "no_proxy": "",
         "NO_PROXY": "",
     }
-    argv = [sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q"]
+    argv = [*BELOW, sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q"]
     argv += [str(DOCS), str(out / "html"), "-d", str(out / "doctrees")]
     start = time.monotonic()
     done = subprocess.run(argv, cwd=ROOT, env=env, capture_output=True, text=True, timeout=840)

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from batch import BELOW
 
 # one test process runs the module: one worktree, whose numba cache the later configs reuse
 pytestmark = [pytest.mark.system, pytest.mark.xdist_group("golden")]
@@ -175,7 +176,7 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> Any:
 
 def _start(shared: Path, config: Path, filters: list[str], out: Path) -> subprocess.Popen[str]:
     """``tltrack experiment`` with the package in ``shared`` (and nowhere else); log in ``out``."""
-    argv = [sys.executable, "-m", "tltrack", "experiment", "--config", str(config)]
+    argv = [*BELOW, sys.executable, "-m", "tltrack", "experiment", "--config", str(config)]
     argv += ["--filters", ",".join(filters), "--particles", "300", "--runs", "5", "--seed", "2"]
     argv += ["--workers", "1", "--out", str(out)]
     env = {**os.environ, "PYTHONPATH": str(shared), "MPLBACKEND": "Agg"}

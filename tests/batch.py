@@ -1,0 +1,11 @@
+"""Batch work runs below the live stacks' priority.
+
+``make test`` runs the live tests (whose steps have deadlines of tens of milliseconds) beside
+CPU-bound batch work: the golden trees' experiments, the site's build, the image's wheels. On two
+cores a live service then waits for the CPU past its deadline now and then, and a step goes
+isolated that should not. Started through :data:`BELOW`, the batch work yields the CPU to them;
+it takes as long as before when nothing else runs.
+"""
+
+#: prefix of a batch command: niceness 10 (the live stacks run at 0)
+BELOW = ["nice", "-n", "10"]
