@@ -56,3 +56,10 @@ def test_a_bad_file_is_refused_whole_naming_the_line(
 def test_a_missing_column_of_a_sensor_in_use_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ReplayError, match=r"missing column.*range_rate_mps"):
         load(write(tmp_path, "1,primary,0.7\n", "k,sensor,bearing_rad,range_m\n"), SENSORS)
+
+
+def test_two_rows_of_one_step_are_refused_naming_both_lines(tmp_path: Path) -> None:
+    """They used to keep the second row without a word: a measurement lost."""
+    rows = "1,primary,,0.78,,,\n1,s1,4000,0.2,-3.5,,\n1,s1,4005,0.2,-3.5,,\n"
+    with pytest.raises(ReplayError, match=re.escape("'s1' has 2 rows for step 1 (lines 3, 4)")):
+        load(write(tmp_path, rows), SENSORS)

@@ -3,7 +3,18 @@
 Option names are a contract: other tools call them.
 """
 
-from tltrack.app import access, bench, demo, experiment, fit, reproduce, router, study
+from tltrack.app import access, bench, demo, experiment, fit, reproduce, router, study, track
 from tltrack.app.common import app
 
-__all__ = ["access", "app", "bench", "demo", "experiment", "fit", "reproduce", "router", "study"]
+__all__ = [
+    "access",
+    "app",
+    "bench",
+    "demo",
+    "experiment",
+    "fit",
+    "reproduce",
+    "router",
+    "study",
+    "track",
+]

@@ -1,37 +1,32 @@
-"""Recorded measurements from a CSV file, so that real sensor data can drive the trackers.
+"""Recorded measurements from a CSV file, so that real sensor data can drive the live services.
 
-Schema (header row required; extra columns are ignored)::
+The file is a scan file (:mod:`tltrack.engine.scan_file`: its schema, its checks), with one
+detection per step and sensor: a live measurement message carries one z_k. For example::
 
     k,sensor,range_m,bearing_rad,range_rate_mps,x_m,y_m
     1,primary,,0.7861,,,
     1,s1,1436.9,0.7850,,,
 
-- ``k``: step index 1..K; every step must have a row for the primary and for each source;
-- ``sensor``: ``primary`` or a source id of the configuration;
-- one column per measurement component, named after it (each sensor kind's ``components``:
-  ``range_m`` (m, > 0), ``bearing_rad`` (rad, atan2 convention from the sensor's position, in
-  [-pi, pi]), ``range_rate_mps`` (m/s), ``x_m`` and ``y_m`` (m)). A row fills the columns of its
-  sensor's kind and leaves the others empty.
+K is the file's last step. A step with no row, or with two rows, for a sensor is refused, naming
+the lines: two rows of one step used to keep the second without a word. ``tltrack track --scans``
+runs the same files offline, with any number of rows per step.
+
+The measurement components (each sensor kind's ``components``): ``range_m`` (m, > 0),
+``bearing_rad`` (rad, atan2 convention from the sensor's position, in [-pi, pi]),
+``range_rate_mps`` (m/s), ``x_m`` and ``y_m`` (m). A row fills the columns of its sensor's kind
+and leaves the others empty.
 
 A bad file is refused as a whole, with the line number, before anything is published.
 """
 
 from __future__ import annotations
 
-import csv
-import math
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from tltrack.engine.scan_file import ScanFileError, read_scans
 from tltrack.models.base import MeasurementModel
-
-REQUIRED = ("k", "sensor")
-#: what a component's value must satisfy, beyond being a finite number
-CHECKS = {
-    "range_m": (lambda v: v > 0, "finite and > 0"),
-    "bearing_rad": (lambda v: abs(v) <= math.pi, "finite and in [-pi, pi]"),
-}
 
 
 class ReplayError(ValueError):
@@ -41,58 +36,22 @@ class ReplayError(ValueError):
 def load(path: Path, sensors: dict[str, MeasurementModel]) -> dict[str, NDArray[np.float64]]:
     """sensor id -> (K, n_z) measurements, validated against the schema above."""
     try:
-        with open(path, newline="") as fh:
-            reader = csv.DictReader(fh)
-            header = reader.fieldnames or []
-            needed = {c for s in sensors.values() for c in s.components}
-            missing = [c for c in (*REQUIRED, *sorted(needed)) if c not in header]
-            if missing:
-                raise ReplayError(f"{path}: missing column(s) {', '.join(missing)}")
-            rows: dict[tuple[int, str], list[float]] = {}
-            for line, row in enumerate(reader, start=2):
-                k, sid = _key(path, line, row, sensors)
-                rows[k, sid] = _values(path, line, row, sensors[sid])
-    except OSError as err:
-        raise ReplayError(f"cannot read {path}: {err.strerror}") from None
-    K = max((k for k, _ in rows), default=0)
-    if K == 0:
-        raise ReplayError(f"{path}: no measurements")
+        scans = read_scans(path, sensors)
+    except ScanFileError as err:
+        raise ReplayError(str(err)) from None
+    if scans.refused:
+        raise ReplayError(scans.refused[0])
     out = {}
-    for s in sensors:
-        gaps = [k for k in range(1, K + 1) if (k, s) not in rows]
-        if gaps:
-            raise ReplayError(f"{path}: sensor {s!r} has no row for step(s) {gaps[:5]}")
-        out[s] = np.array([rows[k, s] for k in range(1, K + 1)])
-    return out
-
-
-def _key(
-    path: Path, line: int, row: dict[str, str], sensors: dict[str, MeasurementModel]
-) -> tuple[int, str]:
-    try:
-        k = int(row["k"])
-    except (TypeError, ValueError):
-        raise ReplayError(f"{path}:{line}: k must be an integer") from None
-    if k < 1:
-        raise ReplayError(f"{path}:{line}: need k >= 1")
-    if row["sensor"] not in sensors:
-        known = list(sensors)
-        raise ReplayError(f"{path}:{line}: unknown sensor {row['sensor']!r} (known: {known})")
-    return k, row["sensor"]
-
-
-def _values(path: Path, line: int, row: dict[str, str], sensor: MeasurementModel) -> list[float]:
-    """The row's measurement of ``sensor``: its kind's columns, each a finite number."""
-    values = []
-    for name in sensor.components:
-        try:
-            v = float(row[name])
-        except (TypeError, ValueError):
+    for sid in sensors:
+        counts = scans.counts(sid)
+        if gaps := [int(k) + 1 for k in np.flatnonzero(counts == 0)]:
+            raise ReplayError(f"{path}: sensor {sid!r} has no row for step(s) {gaps[:5]}")
+        if many := [int(k) + 1 for k in np.flatnonzero(counts > 1)]:
+            k = many[0]
+            lines = ", ".join(map(str, scans.lines[sid, k]))
             raise ReplayError(
-                f"{path}:{line}: a {sensor.kind} sensor needs {name} as a number"
-            ) from None
-        ok, want = CHECKS.get(name, (lambda v: True, "finite"))
-        if not (math.isfinite(v) and ok(v)):
-            raise ReplayError(f"{path}:{line}: {name} must be {want}")
-        values.append(v)
-    return values
+                f"{path}: sensor {sid!r} has {counts[k - 1]} rows for step {k} (lines {lines}): "
+                "the live replay takes one per step (tltrack track --scans takes any number)"
+            )
+        out[sid] = np.concatenate([d for d in scans.detections[sid] if d is not None])
+    return out

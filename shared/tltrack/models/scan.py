@@ -23,6 +23,9 @@ from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
 
+#: the most detections one scan may hold, in a file or on the wire: a larger one is refused
+MAX_DETECTIONS = 4096
+
 
 @dataclass(frozen=True)
 class Scan:

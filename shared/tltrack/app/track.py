@@ -1,0 +1,168 @@
+"""``tltrack track``: the trackers over a file of recorded scans, offline."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import numpy as np
+import typer
+
+from tltrack.app.common import app, build_config, console, progress_bar
+
+if TYPE_CHECKING:
+    from tltrack.config import Config
+    from tltrack.engine.setup import Setup
+
+
+@app.command(
+    epilog="Examples:\n\n"
+    "    tltrack track --scans plots.csv --config radar.toml --out out/track\n\n"
+    "    tltrack track --scans plots.csv --preset arasaratnam-haykin --pd 0.9 --clutter-rate 20 "
+    "--truth-file track.csv --filters rpf,tl-rpf,ukf --out out/track"
+)
+def track(
+    scans: Annotated[
+        Path, typer.Option(help="the recorded scans (CSV k,sensor,<components>[,is_clutter])")
+    ],
+    out: Annotated[Path, typer.Option(help="output directory")],
+    config: Annotated[Path | None, typer.Option(help="TOML or JSON config file")] = None,
+    scenario: Annotated[str | None, typer.Option(help="the motion model")] = None,
+    preset: Annotated[str | None, typer.Option(help="paper or arasaratnam-haykin")] = None,
+    filters: Annotated[str, typer.Option(help="comma-separated filter names")] = "rpf,tl-rpf",
+    particles: Annotated[int | None, typer.Option(help="particles per PF")] = None,
+    seed: Annotated[int | None, typer.Option(help="seed of the filters' random numbers")] = None,
+    steps: Annotated[int | None, typer.Option(help="K: the steps to track (the config's)")] = None,
+    pd: Annotated[float | None, typer.Option(help="the primary's probability of detection")] = None,
+    clutter_rate: Annotated[
+        float | None, typer.Option(help="the primary's false alarms per scan")
+    ] = None,
+    source_pd: Annotated[float | None, typer.Option(help="every source's pd")] = None,
+    source_clutter_rate: Annotated[
+        float | None, typer.Option(help="every source's false alarms per scan")
+    ] = None,
+    truth_file: Annotated[
+        Path | None,
+        typer.Option(help="the target's recorded track (CSV t,x,y or t,lat,lon): scores too"),
+    ] = None,
+) -> None:
+    """Run the sources and the primary over recorded scans, as fast as the machine allows.
+
+    Each row of the file is one detection; a step with no row for a sensor is an empty scan.
+    Writes every filter's estimates (`estimates.csv`), the transfers the sources would have sent
+    (`transfers.csv`) and, with `--truth-file`, the scores of `tltrack experiment`
+    (`results.json`).
+    """
+    from tltrack.config.truth_file import file_truth
+    from tltrack.engine import results
+    from tltrack.engine.montecarlo import check_filters
+    from tltrack.engine.registry import parse
+    from tltrack.engine.scan_file import ScanFileError, read_scans
+    from tltrack.engine.setup import Setup
+    from tltrack.engine.track import ScansDoNotFitError
+    from tltrack.engine.track import track as run_track
+
+    cfg = build_config(
+        config,
+        scenario=scenario,
+        preset=preset,
+        particles=particles,
+        seed=seed,
+        K=steps,
+        pd=pd,
+        clutter_rate=clutter_rate,
+        source_pd=source_pd,
+        source_clutter_rate=source_clutter_rate,
+        truth_file=truth_file,
+    )
+    names = [n.strip() for n in filters.split(",") if n.strip()]
+    try:
+        for n in names:
+            parse(n, trusted=True)
+        check_filters(cfg, names)
+    except ValueError as err:
+        console.print(f"[red]error:[/red] --filters: {err}")
+        raise typer.Exit(2) from None
+    setup = Setup(cfg)
+    try:
+        recorded = read_scans(scans, {sid: setup.sensor(sid) for sid in setup.sensor_ids}, cfg.K)
+    except ScanFileError as err:
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+    for reason in recorded.refused:
+        console.print(f"[yellow]refused:[/yellow] {reason}")
+    truth = file_truth(cfg) if cfg.truth == "file" else None
+    with progress_bar(cfg.K, "steps") as bar:
+        task = bar.add_task("steps", total=cfg.K)
+        try:
+            done = run_track(cfg, names, recorded, truth, lambda: bar.advance(task))
+        except ScansDoNotFitError as err:
+            console.print(f"[red]error:[/red] {err}")
+            raise typer.Exit(2) from None
+    out.mkdir(parents=True, exist_ok=True)
+    _write_estimates(out / "estimates.csv", cfg, done.tracks.estimates)
+    _write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
+    wrote = [out / "estimates.csv", out / "transfers.csv"]
+    if done.scores is not None:
+        wrote.append(results.write(results.assemble(cfg, done.scores), out))
+        for name, r in done.scores.items():
+            console.print(f"{name}: position RMSE {r.rmse_overall:.2f} m")
+    refused = len(recorded.refused)
+    console.print(f"{cfg.K} steps, {refused} scan(s) refused; wrote {', '.join(map(str, wrote))}")
+
+
+#: the state's components that lead every estimates.csv, whatever the motion model's order
+LEADING = ("x_m", "y_m", "vx_mps", "vy_mps")
+
+
+def _write_estimates(
+    path: Path, cfg: Config, rows: list[tuple[int, str, np.ndarray, np.ndarray]]
+) -> None:
+    """k, filter, x_m, y_m, vx_mps, vy_mps, the state's other components, and the position
+    covariance P_xx, P_xy, P_yy."""
+    from tltrack.models.kinds import MOTIONS
+
+    components = list(MOTIONS.get(cfg.scenario).components)
+    order = [c for c in LEADING if c in components] + [c for c in components if c not in LEADING]
+    at = [components.index(c) for c in order]
+    ix, iy = components.index("x_m"), components.index("y_m")
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["k", "filter", *order, "P_xx", "P_xy", "P_yy"])
+        for k, name, x, P in rows:
+            cov = (P[ix, ix], P[ix, iy], P[iy, iy])
+            w.writerow([k, name, *(_num(x[i]) for i in at), *(_num(v) for v in cov)])
+
+
+def _write_transfers(
+    path: Path, setup: Setup, rows: list[tuple[int, str, str, np.ndarray, np.ndarray]]
+) -> None:
+    """k_apply, source, filter, eta_<component>... and P_<ci>_<cj> (i <= j) of each transfer,
+    in its source sensor's components (the columns of the sources' kinds; empty where a
+    source's kind has no such component)."""
+    comps: list[str] = []
+    for sid in setup.source_ids:
+        comps += [c for c in setup.sensor(sid).components if c not in comps]
+    pairs = [(a, b) for i, a in enumerate(comps) for b in comps[i:]]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(
+            [
+                "k_apply",
+                "source",
+                "filter",
+                *(f"eta_{c}" for c in comps),
+                *(f"P_{a}_{b}" for a, b in pairs),
+            ]
+        )
+        for k_apply, name, sid, eta, P in rows:
+            own = list(setup.sensor(sid).components)
+            at = {c: i for i, c in enumerate(own)}
+            means = [_num(eta[at[c]]) if c in at else "" for c in comps]
+            covs = [_num(P[at[a], at[b]]) if a in at and b in at else "" for a, b in pairs]
+            w.writerow([k_apply, sid, name, *means, *covs])
+
+
+def _num(v: float) -> str:
+    return repr(float(v))

@@ -1,0 +1,123 @@
+"""Offline tracking of recorded scans: the sources and the primary over a scan file, through the
+step driver, as fast as the machine allows (``tltrack track``).
+
+One run (a batch of one), started at the config's x0 (the prior mean, not a draw around it: there
+is no Monte-Carlo run to vary). At each step every sensor's recorded scan becomes what its filters
+take (:meth:`~tltrack.engine.setup.OwnSensor.statement`): the scan itself when the sensor misses
+or reports false alarms, the one detection otherwise. A scan refused as too large is no statement:
+the filters predict through it. What comes out: every filter's estimate per step, the transfers
+the sources would have sent, and, against a recorded truth, the scores ``tltrack experiment``
+writes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tltrack.config import Config
+from tltrack.engine.driver import Collector, Driver, StepRecord
+from tltrack.engine.montecarlo import FilterResult, Scores, own_n_z
+from tltrack.engine.scan_file import ScanFile
+from tltrack.engine.setup import Setup
+from tltrack.models.scan import Statement
+
+Array = NDArray[np.float64]
+
+
+class ScansDoNotFitError(ValueError):
+    """The file's scans contradict the config's detection process."""
+
+
+@dataclass
+class Tracks:
+    """A collector: each filter's (k, mean, cov), and each source's transfers
+    (k_apply, source id, eta_hat, P_eta_eta)."""
+
+    estimates: list[tuple[int, str, Array, Array]] = field(default_factory=list)
+    transfers: list[tuple[int, str, str, Array, Array]] = field(default_factory=list)
+
+    def __call__(self, record: StepRecord) -> None:
+        r = record
+        self.estimates.append((r.k, r.name, r.estimate.mean[0], r.estimate.cov[0]))
+        if r.transfer is not None:
+            t = r.transfer
+            self.transfers.append((r.k + 1, r.name, t.origin or "", t.mean[:, 0], t.cov[0]))
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    tracks: Tracks
+    scores: dict[str, FilterResult] | None  #: against the truth, when there is one
+    refused: list[str]  #: the scans refused (too large), with the line of each
+
+
+def check_fit(setup: Setup, scans: ScanFile) -> None:
+    """A sensor the config says detects every step with no false alarm (pd 1, no clutter) takes
+    exactly one detection per step: refuse a file that has none or several, naming the step."""
+    for sid in setup.sensor_ids:
+        if not setup.sensors[sid].detection.trivial:
+            continue
+        counts = scans.counts(sid)
+        wrong = np.flatnonzero((counts != 1) & (counts != -1))
+        if len(wrong):
+            k = int(wrong[0]) + 1
+            lines = ", ".join(map(str, scans.lines.get((sid, k), []))) or "none"
+            raise ScansDoNotFitError(
+                f"{scans.path}: step {k} of sensor {sid!r} has {counts[k - 1]} detections (lines: "
+                f"{lines}), but the config gives {sid!r} pd 1 and no false alarms: give its "
+                "detection process (primary_detection or sources[].detection; --pd, "
+                "--clutter-rate, --source-pd, --source-clutter-rate)"
+            )
+
+
+def statements(setup: Setup, scans: ScanFile, k: int) -> dict[str, Statement | None]:
+    """What each sensor's filters take at step k (None: the scan was refused)."""
+    out: dict[str, Statement | None] = {}
+    for sid in setup.sensor_ids:
+        dets, own = scans.scan(sid, k), setup.sensors[sid]
+        if dets is None:
+            out[sid] = None
+        elif own.detection.trivial:
+            out[sid] = own.observe(dets.T)
+        else:
+            out[sid] = own.scan([dets])
+    return out
+
+
+def track(
+    cfg: Config,
+    names: Sequence[str],
+    scans: ScanFile,
+    truth: Array | None = None,
+    progress: Callable[[], None] = lambda: None,
+    *,
+    x0_hat: Array | None = None,
+    run: int = 0,
+) -> TrackResult:
+    """Every filter of ``names`` (and the sources they listen to) over ``scans``; scored against
+    ``truth`` (K + 1, n_x) when given; ``progress()`` after each step.
+
+    The filters start at ``x0_hat`` (default: the config's x0) and draw the random numbers of
+    Monte-Carlo run ``run``: with a run's x0_hat and scans, the engine's numbers for that run."""
+    setup = Setup(cfg)
+    check_fit(setup, scans)
+    tracks = Tracks()
+    collectors: list[Collector] = [tracks]
+    scores = None
+    if truth is not None:
+        scores = Scores(truth[:, None, :], setup.layout, True, False, own_n_z(setup))
+        collectors.append(scores)
+    start = np.asarray(cfg.x0 if x0_hat is None else x0_hat, dtype=float)[:, None]
+    driver = Driver([setup], names, start, [run], collectors=[collectors])
+    for k in range(1, scans.K + 1):
+        driver.step(k, [statements(setup, scans, k)])
+        progress()
+    results = None
+    if scores is not None:
+        stats = scores.close()
+        results = {n: FilterResult.from_stats(s, 1, cfg.lost_threshold_m) for n, s in stats.items()}
+    return TrackResult(tracks, results, scans.refused)
