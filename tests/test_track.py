@@ -128,6 +128,7 @@ def test_track_runs_a_file_with_duplicates_empty_scans_and_a_scan_over_the_bound
     assert [int(t["k_apply"]) for t in transfers] == list(range(2, 27))
     assert {t["source"] for t in transfers} == {"s1"}
     assert not (out / "results.json").exists()  # no truth, no scores
+    assert (out / "scans.png").stat().st_size > 10_000
 
 
 @pytest.mark.parametrize(

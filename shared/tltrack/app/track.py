@@ -13,6 +13,7 @@ from tltrack.app.common import app, build_config, console, progress_bar
 
 if TYPE_CHECKING:
     from tltrack.config import Config
+    from tltrack.engine.scan_file import ScanFile
     from tltrack.engine.setup import Setup
 
 
@@ -103,7 +104,11 @@ def track(
     out.mkdir(parents=True, exist_ok=True)
     _write_estimates(out / "estimates.csv", cfg, done.tracks.estimates)
     _write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
-    wrote = [out / "estimates.csv", out / "transfers.csv"]
+    wrote = [
+        out / "estimates.csv",
+        out / "transfers.csv",
+        _draw(out / "scans.png", setup, recorded, done.tracks.estimates, truth),
+    ]
     if done.scores is not None:
         wrote.append(results.write(results.assemble(cfg, done.scores), out))
         for name, r in done.scores.items():
@@ -162,6 +167,38 @@ def _write_transfers(
             means = [_num(eta[at[c]]) if c in at else "" for c in comps]
             covs = [_num(P[at[a], at[b]]) if a in at and b in at else "" for a, b in pairs]
             w.writerow([k_apply, sid, name, *means, *covs])
+
+
+def _draw(
+    path: Path,
+    setup: Setup,
+    recorded: ScanFile,
+    estimates: list[tuple[int, str, np.ndarray, np.ndarray]],
+    truth: np.ndarray | None,
+) -> Path:
+    """The primary's detections (when its sensor fixes a position) under the primary filters'
+    estimates, and the truth when there is one."""
+    from tltrack.engine.plots import scans_and_tracks
+    from tltrack.engine.setup import PRIMARY
+    from tltrack.filters.decision import PositionFix
+
+    layout, sensor = setup.layout, setup.sensor(PRIMARY)
+    tracks: dict[str, list[np.ndarray]] = {}
+    for _k, name, x, _P in estimates:
+        if not name.startswith("source-"):
+            tracks.setdefault(name, []).append(layout.position(x))
+    dets: np.ndarray | None = None
+    labels: np.ndarray | None = None
+    steps = [k for k, d in enumerate(recorded.detections[PRIMARY]) if d is not None and len(d)]
+    if isinstance(sensor, PositionFix) and steps:
+        z = np.concatenate([recorded.detections[PRIMARY][k] for k in steps]).T
+        no_noise = np.zeros((z.shape[1], sensor.n_z, sensor.n_z))
+        dets = sensor.to_position(z, no_noise)[0].T
+        known = [recorded.is_clutter[PRIMARY][k] for k in steps]
+        if all(c is not None for c in known):
+            labels = np.concatenate(known)  # type: ignore[arg-type]
+    xy = None if truth is None else layout.position(truth.T).T
+    return scans_and_tracks(dets, labels, {n: np.array(v) for n, v in tracks.items()}, path, xy)
 
 
 def _num(v: float) -> str:

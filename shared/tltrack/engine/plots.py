@@ -76,6 +76,43 @@ def trajectory(
     return _save(fig, path)
 
 
+def scans_and_tracks(
+    detections: NDArray[np.float64] | None,
+    clutter: NDArray[np.bool_] | None,
+    tracks: Mapping[str, NDArray[np.float64]],
+    path: Path,
+    truth: NDArray[np.float64] | None = None,
+    title: str = "",
+) -> Path:
+    """A sensor's detections of every step (M, 2) as positions, grey (false alarms light grey
+    when the file says which they are), under each filter's estimates (K, 2) and the truth."""
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    if detections is not None and len(detections):
+        fake = np.zeros(len(detections), bool) if clutter is None else clutter
+        bad, good = detections[fake], detections[~fake]
+        ax.scatter(bad[:, 0], bad[:, 1], s=4, color="0.8", label="false alarms", zorder=1)
+        shown = "detections" if clutter is None else "target's detections"
+        ax.scatter(good[:, 0], good[:, 1], s=6, color="0.45", label=shown, zorder=2)
+    if truth is not None:
+        ax.plot(truth[:, 0], truth[:, 1], color="black", lw=2, label="truth", zorder=3)
+    for name, xy in tracks.items():
+        ax.plot(xy[:, 0], xy[:, 1], lw=1.2, label=name, zorder=4, **_style(name))
+    # around the tracks: false alarms spread over the whole field of view would shrink them to a dot
+    drawn = [xy for xy in (*tracks.values(), truth) if xy is not None and len(xy)]
+    if drawn:
+        lo, hi = np.min([d.min(0) for d in drawn], 0), np.max([d.max(0) for d in drawn], 0)
+        pad = max(0.25 * float(np.max(hi - lo)), 300.0)
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_title(title or "recorded scans and estimates")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    return _save(fig, path)
+
+
 def curves(
     x: Sequence[float],
     series: Mapping[str, Sequence[float]],
