@@ -16,8 +16,9 @@ Schema (header row required; extra columns are ignored)::
   for scoring only: no filter sees it.
 
 Each row is one detection, so two rows of the same step and sensor are two detections, and a step
-with no row for a sensor is an empty scan: the sensor saw nothing, which the measurement-set
-likelihood reads as evidence (a missed detection), not as a step without a scan.
+with no row for a sensor is an empty scan: the sensor saw nothing. The filters predict through it
+(the measurement-set likelihood of no detection is the same for every state the sensor sees, and
+PDA keeps the prediction), so an empty scan is not an error.
 
 A malformed row (a missing or non-numeric field, a NaN, a step beyond K, an unknown sensor) refuses
 the whole file, naming its line, before any filter runs. A scan of more than
