@@ -805,12 +805,15 @@ def test_three_sources_profile_under_the_acl(stack: Stack) -> None:
         assert counts.get(f"source-rpf/{sid}", (0, 0))[0] == THREE_STEPS, (sid, counts)
     assert counts["rpf"][0] == counts["tl-rpf"][0] == THREE_STEPS, counts
     assert counts["tl-rpf"][1] > THREE_STEPS // 2, counts
-    # nothing rejected during this episode (each counter counts since its service started)
+    # nothing rejected during this episode (each counter counts since its service started) but
+    # a transfer later than the primary's deadline, which a loaded machine makes now and then
+    # (that step went isolated, as it should: counted above)
     rejected = summary["messages"]["rejected"]
     new = {
         (service, reason): n - rejected_before.get(service, {}).get(reason, 0)
         for service, reasons in rejected.items()
         for reason, n in reasons.items()
+        if reason != "late_transfer"
     }
     assert not {k: n for k, n in new.items() if n > 0}, (rejected_before, rejected)
     assert rejected.get("source/s2/source_tracker") == {}, rejected
