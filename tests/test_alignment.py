@@ -28,7 +28,9 @@ def _replay(shift: int) -> np.ndarray:
     out = []
     for k in range(1, CFG.K + 1):
         z = {
-            i: Measurement(episode="e", sender="t", k=k, t_sensor=0.0, sensor=i, z=run.z[i][k - 1])
+            i: Measurement(
+                episode="e", sender="t", k=k, t_sensor=0.0, sensor=i, z=[run.z[i][k - 1]]
+            )
             for i in (PRIMARY, sid)
         }
         _, eta = src.step(z[sid])
@@ -74,7 +76,9 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
     out = []
     for k in range(1, cfg.K + 1):
         for s, src in srcs.items():
-            z = Measurement(episode="e", sender="t", k=k, t_sensor=0.0, sensor=s, z=run.z[s][k - 1])
+            z = Measurement(
+                episode="e", sender="t", k=k, t_sensor=0.0, sensor=s, z=[run.z[s][k - 1]]
+            )
             _, eta = src.step(z)
             made[s][k + 1] = Transfer(
                 episode="e",
@@ -88,7 +92,7 @@ def test_the_engines_robust_primary_keeps_each_sources_record_as_a_live_one_does
             )
         transfers = {s: made[s][k - lag[s]] for s in lag if k - lag[s] in made[s]}
         z = Measurement(
-            episode="e", sender="t", k=k, t_sensor=0.0, sensor=PRIMARY, z=run.z[PRIMARY][k - 1]
+            episode="e", sender="t", k=k, t_sensor=0.0, sensor=PRIMARY, z=[run.z[PRIMARY][k - 1]]
         )
         tl = prim.step(z, transfers)
         out.append(tl.mean[0])

@@ -73,7 +73,7 @@ def _live_estimates(aircraft: Path) -> tuple[EpisodeStart, list[Truth], list[Est
     truths, estimates = [], []
     for k in range(1, cfg.K + 1):
         z = Measurement(episode=E, sender="sensor", k=k, t_sensor=time.time(), sensor=PRIMARY,
-                        z=run.z[PRIMARY][k - 1])  # fmt: skip
+                        z=[run.z[PRIMARY][k - 1]])  # fmt: skip
         est = tracker.step(z, {})
         nis = tracker.monitor.last[tracker.tl_name]
         report = StepReport(z, keys.PRIMARY, tracker.tl_name, tracker.layout, est, False, False,

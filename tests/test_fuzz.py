@@ -81,7 +81,7 @@ def _template(kind: str) -> Message:
             **common | {"k": 0}, sender="sensor_sim", run=0, config=cfg, K=10, steps_per_sec=0.0
         )
     if kind == "measurement":
-        return Measurement(**common, sender="sensor_sim", sensor="primary", z=[1500.0, 0.7])
+        return Measurement(**common, sender="sensor_sim", sensor="primary", z=[[1500.0, 0.7]])
     if kind == "transfer":
         return Transfer(
             **common, sender="s1", k_apply=6, sensor=RADAR, eta=[1500.0, 0.7], P_eta=SPD2

@@ -14,6 +14,7 @@ from doubles import RADAR
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from tltrack.config import make_config
+from tltrack.models.scan import MAX_DETECTIONS
 from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
     MESSAGE_TYPES,
@@ -49,7 +50,7 @@ def _spd(n: int, seed: int = 0) -> np.ndarray:
 def samples() -> list[Message]:
     cfg = make_config(scenario="ct")
     return [
-        Measurement(**COMMON, k=3, sensor="radar-1", z=np.array([1500.0, 0.7])),
+        Measurement(**COMMON, k=3, sensor="radar-1", z=np.array([[1500.0, 0.7]])),
         Truth(**COMMON, k=3, x=np.array([1.0, 2.0, 3.0, 4.0, -0.05]), pos=np.array([1.0, 3.0])),
         Truth(**COMMON, k=0, x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0]),
         Transfer(
@@ -118,9 +119,9 @@ def test_round_trip(msg: Message) -> None:
 
 
 def test_numpy_inputs_become_plain_floats() -> None:
-    z = np.array([1.0, 2.0], dtype=np.float32)
+    z = np.array([[1.0, 2.0]], dtype=np.float32)
     m = Measurement(**COMMON, k=np.int64(2), sensor="a", z=z)  # type: ignore[arg-type]
-    assert type(m.z) is list and all(type(v) is float for v in m.z)
+    assert type(m.z) is list and all(type(v) is float for d in m.z for v in d)
     assert decode(encode(m), Measurement) == m
 
 
@@ -205,7 +206,7 @@ def test_unknown_schema_version(version: Any) -> None:
 
 def test_constructing_an_unknown_version_fails() -> None:
     with pytest.raises(ValueError):
-        Measurement(**COMMON, k=0, sensor="a", z=[1.0, 2.0], schema_version=V + 1)
+        Measurement(**COMMON, k=0, sensor="a", z=[[1.0, 2.0]], schema_version=V + 1)
 
 
 def test_wrong_type_tag() -> None:
@@ -260,7 +261,9 @@ def test_estimate_bad_shapes() -> None:
     d["x"] = [0.0] * 7  # no scenario has 7 states
     assert reject(pack(d), EstimateMsg) == "bad_shape"
     d = raw(samples()[0])
-    d["z"] = [1.0, 2.0, 3.0, 4.0]  # no sensor measures 4 components
+    d["z"] = [[1.0, 2.0, 3.0, 4.0]]  # no sensor measures 4 components
+    assert reject(pack(d), Measurement) == "bad_shape"
+    d["z"] = [[1.0, 2.0], [1.0, 2.0, 3.0]]  # one sensor's detections share its size
     assert reject(pack(d), Measurement) == "bad_shape"
     d = raw(samples()[1])
     d["x"] = [1.0, 2.0, 3.0]
@@ -522,3 +525,16 @@ def test_the_wire_imports_no_statistics_library() -> None:
     code = "import sys, tltrack.wire.transport; print('scipy.stats' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_a_measurement_carries_a_scan_of_up_to_4096_detections() -> None:
+    """None is an empty scan, not an error; the largest scan of the widest built-in sensor fits
+    the payload bound; one more detection is refused with its own reason."""
+    empty = Measurement(**COMMON, k=1, sensor="a", z=[])
+    assert decode(encode(empty), Measurement).z == []
+    rng = np.random.default_rng(0)
+    full = Measurement(**COMMON, k=1, sensor="a", z=rng.normal(size=(MAX_DETECTIONS, 3)))
+    assert decode(encode(full), Measurement) == full
+    d = raw(full)
+    d["z"] = d["z"] + [[1.0, 2.0, 3.0]]
+    assert reject(pack(d), Measurement) == "scan_too_large"

@@ -1,6 +1,7 @@
 """The four services and a router as real processes over loopback Zenoh."""
 
 import contextlib
+import json
 import shutil
 import sqlite3
 
@@ -26,20 +27,44 @@ from tltrack.wire.messages import SCHEMA_VERSION
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 
-@pytest.mark.parametrize("robust", [False, True], ids=["tl-rpf", "robust-tl-rpf"])
-def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust):
+#: a primary radar that misses the target one scan in ten among 5 false alarms a scan, and a
+#: source that misses one in twenty
+CLUTTER = {
+    "primary_detection": {"pd": 0.9, "clutter_rate": 5.0},
+    "sources": [{"id": "s1", "detection": {"pd": 0.95, "clutter_rate": 1.0}}],
+}
+
+
+@pytest.mark.parametrize(
+    ("robust", "clutter"),
+    [(False, False), (True, False), (False, True)],
+    ids=["tl-rpf", "robust-tl-rpf", "tl-rpf-in-clutter"],
+)
+def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust, clutter):
+    """The live services step exactly as the engine; in clutter, every scan goes on the wire."""
     db = tmp_path / "scorer.sqlite"
     K, N = 30, 500
     tl = "robust-tl-rpf" if robust else "tl-rpf"
     primary_env = {"TLTRACK_PRIMARY_LOCKSTEP": "true", "TLTRACK_PRIMARY_ROBUST": str(robust)}
+    sim = sim_flags(K, N, pace=0)
+    if clutter:
+        given = tmp_path / "clutter.json"
+        given.write_text(json.dumps(CLUTTER))
+        sim.append(f"--config={given}")
     with stack(tmp_path) as s:
-        start_all(s, db, primary_env=primary_env, sim=sim_flags(K, N, pace=0))
+        start_all(s, db, primary_env=primary_env, sim=sim)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
         assert summary is not None, logs(s)
     cfg = make_config(
-        preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True
-    )  # the trackers' default, as the engine's is off
+        preset="arasaratnam-haykin",
+        truth="fixed",
+        seed=7,
+        K=K,
+        particles=N,
+        recovery=True,  # the trackers' default, as the engine's is off
+        **(CLUTTER if clutter else {}),
+    )
     offline = trace_run(cfg, [tl, "rpf", "source-rpf"], run=0)
     live = estimates(db)
     for name in (tl, "rpf", "source-rpf"):

@@ -351,7 +351,7 @@ def test_pub_sub_delivers_messages_in_order(router: str) -> None:
                 k=k,
                 t_sensor=T0 + k,
                 sensor="p",
-                z=[1000.0 + k, 0.1],
+                z=[[1000.0 + k, 0.1]],
             )
             for k in range(200)
         ]

@@ -71,6 +71,10 @@ class Episode:
     def n_z(self) -> int:
         return self.tracker.n_z
 
+    @property
+    def one_detection(self) -> bool:
+        return self.tracker.one_detection
+
 
 class PrimaryTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack.config import Config
-from tltrack.engine.scenario import measurements, truth
+from tltrack.engine.scenario import reports, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
 from tltrack.live.service import Service, load_settings, setup_logging
@@ -60,8 +60,10 @@ class Sensor:
 
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        #: episode -> its measurements, (K, n_z)
-        self.episodes: Episodes[NDArray[np.float64]] = Episodes(settings.max_episodes, self._open)
+        #: episode -> its scans, (M_k, n_z) for k = 1..K
+        self.episodes: Episodes[list[NDArray[np.float64]]] = Episodes(
+            settings.max_episodes, self._open
+        )
 
     def key(self, e: str) -> str:
         sid = self.s.sensor
@@ -100,17 +102,17 @@ class Sensor:
         self.svc.count("steps")
         self.episodes.retire(e, tick.k + 1)
 
-    def _open(self, start: EpisodeStart, cfg: Config) -> NDArray[np.float64] | None:
+    def _open(self, start: EpisodeStart, cfg: Config) -> list[NDArray[np.float64]] | None:
         sid = self.s.sensor
         if sid != PRIMARY and sid not in {src.id for src in cfg.sources}:
             log.info("episode %s has no sensor %s; ignored", start.episode, sid)
             return None
         setup = Setup(cfg)
         if self.s.replay_csv is None:
-            z = measurements(setup, start.run, truth(setup, start.run), sid)
+            z = reports(setup, start.run, truth(setup, start.run), sid)
         else:
             try:
-                z = replay.load(self.s.replay_csv, {sid: setup.sensor(sid)})[sid]
+                z = [scan[sid] for scan in replay.load(self.s.replay_csv, setup, [sid])]
             except replay.ReplayError as err:
                 log.error("episode %s: nothing to replay: %s", start.episode, err)
                 self.svc.count("replay_refused")

@@ -100,10 +100,11 @@ class Simulator:
                 "with --measurements false each operator's sensor replays its own rows "
                 "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
             )
-        models = {sid: setup.sensor(sid) for sid in self.sensors}
-        self.recorded = replay.load(settings.replay_csv, models) if settings.replay_csv else None
+        self.recorded = (
+            replay.load(settings.replay_csv, setup, self.sensors) if settings.replay_csv else None
+        )
         if self.recorded is not None:
-            self.cfg = cfg.with_(K=len(self.recorded[PRIMARY]))
+            self.cfg = cfg.with_(K=len(self.recorded))
 
     @property
     def period(self) -> float:
@@ -130,10 +131,10 @@ class Simulator:
         e = f"{self.s.episode_prefix}-r{run}"
         if self.recorded is None:
             sim = simulate(Setup(self.cfg), run)
-            z: dict[str, NDArray[np.float64]] = sim.z
+            scans = [{sid: sim.detections(sid, k) for sid in self.sensors} for k in self.steps]
             truth: NDArray[np.float64] | None = sim.truth
         else:
-            z, truth = self.recorded, None
+            scans, truth = self.recorded, None
         start = EpisodeStart(
             episode=e,
             sender=NAME,
@@ -151,11 +152,16 @@ class Simulator:
             # Every service opens the episode first; a sensor regenerates its truth from the
             # seeds (58 ms at K = 5000). Ticks sent meanwhile would queue behind that work.
             self.svc.stop.wait(self.s.lead_s)
-            self._publish_steps(e, z, truth)
+            self._publish_steps(e, scans, truth)
+
+    @property
+    def steps(self) -> range:
+        return range(1, self.cfg.K + 1)
 
     def _publish_steps(
-        self, e: str, z: dict[str, NDArray[np.float64]], truth: NDArray[np.float64] | None
+        self, e: str, scans: list[dict[str, NDArray[np.float64]]], truth: NDArray[np.float64] | None
     ) -> None:
+        """Step k's tick, truth and each sensor's scan (``scans[k - 1]``) on its owner's key."""
         t_next = time.monotonic()
         for k in range(1, self.cfg.K + 1):
             if self.svc.stop.is_set():
@@ -178,7 +184,7 @@ class Simulator:
                         k=k,
                         t_sensor=time.time(),  # when this sensor measures: its publication
                         sensor=sid,
-                        z=z[sid][k - 1],
+                        z=scans[k - 1][sid],
                     ),
                 )
             self.svc.count("steps")
@@ -204,8 +210,7 @@ def main(argv: list[str] | None = None) -> None:
     setup_logging(settings.log_level)
     try:
         cfg = settings.load_config()
-        Setup(cfg).check_live()
-    except ValueError as err:  # a ConfigError, a truth file refused, or clutter
+    except ValueError as err:  # a ConfigError, or a truth file refused
         log.error("invalid configuration: %s", err)
         raise SystemExit(2) from None
     with Service(NAME, keys.REFEREE, settings.zenoh) as svc:

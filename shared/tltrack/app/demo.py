@@ -59,7 +59,6 @@ def demo(
     access control, from the operator manifest; every service runs as its operator. Any stop
     signal (or the death of this process) stops every process it started.
     """
-    from tltrack.engine.setup import Setup
     from tltrack.live import supervisor as d
 
     if config is None:
@@ -67,7 +66,6 @@ def demo(
         steps, particles, seed = steps or 100, particles or 6000, seed or 0
     cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
     try:
-        Setup(cfg).check_live()
         d.check_access(manifest_or_exit(manifest), cfg)
     except (ValueError, d.AccessControlMissingError) as err:
         console.print(f"[red]error:[/red] {err}")

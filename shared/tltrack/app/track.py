@@ -92,7 +92,7 @@ def track(
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
     for reason in recorded.refused:
-        console.print(f"[yellow]refused:[/yellow] {reason}")
+        console.print(f"[yellow]refused:[/yellow] {reason}: the filters predict through it")
     truth = file_truth(cfg) if cfg.truth == "file" else None
     with progress_bar(cfg.K, "steps") as bar:
         task = bar.add_task("steps", total=cfg.K)

@@ -127,8 +127,7 @@ def read_scans(
             detections[sid].append(dets if kept else None)
             clutter[sid].append(truth if kept else None)
     refused = [
-        f"{path}:{line}: step {k} of sensor {sid!r} has more than {MAX_DETECTIONS} detections: "
-        "the scan is refused and the filters predict through the step"
+        f"{path}:{line}: step {k} of sensor {sid!r} has more than {MAX_DETECTIONS} detections"
         for (sid, k), line in sorted(over.items(), key=lambda item: item[1])
     ]
     return ScanFile(Path(path), K, detections, clutter, refused, lines)

@@ -75,6 +75,15 @@ def scans(setup: Setup, run: int, x: Array, z: Array, sensor_id: str = PRIMARY) 
     return Scans([d[0] for d in drawn], [d[1] for d in drawn])
 
 
+def reports(setup: Setup, run: int, x: Array, sensor_id: str) -> list[Array]:
+    """What one sensor reports at each step along truth ``x``, (M_k, n_z): its scans, or z_k
+    alone for the paper's sensor. Its own streams only: an operator's sensor draws nothing of
+    another's."""
+    z = measurements(setup, run, x, sensor_id)
+    drawn = scans(setup, run, x, z, sensor_id)
+    return [zk[None, :] for zk in z] if drawn is None else drawn.detections
+
+
 def initial_estimate(cfg: Config, run: int) -> Array:
     """x0_hat ~ N(x0, P0): every filter of the run starts here, not at the true x0."""
     eps = stream(cfg.seed, run, "init").standard_normal(cfg.n_x)
@@ -99,6 +108,13 @@ class Run:
     z: dict[str, Array]  # sensor id -> (K, n_z): the target's measurements
     x0_hat: Array  # (n_x,)
     scans: dict[str, Scans] = field(default_factory=dict)  # the sensors that miss or clutter
+
+    def detections(self, sensor_id: str, k: int) -> Array:
+        """What the sensor reports at step k, (M_k, n_z): its scan, or z_k alone for the paper's
+        sensor (a live measurement message carries it so)."""
+        if sensor_id in self.scans:
+            return self.scans[sensor_id].detections[k - 1]
+        return self.z[sensor_id][k - 1][None, :]
 
 
 def simulate(setup: Setup, run: int) -> Run:

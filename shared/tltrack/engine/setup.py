@@ -108,6 +108,13 @@ class OwnSensor:
         """Each run's detections at k, (M_b, n_z), as one scan of the batch."""
         return Scan.pack(self.model, scans, self.R, self.detection, self.gate_probability)
 
+    def report(self, detections: Array) -> Statement:
+        """What the filters of one run take of the sensor's report at k, (M, n_z): its one
+        detection as z_k for the paper's sensor (which reports exactly one), else the scan."""
+        if self.detection.trivial:
+            return self.observe(detections[0])
+        return self.scan([detections])
+
     def statement(self, z: Array, scans: list[Array] | None) -> Statement:
         """What the filters take at k: the scans when the sensor misses or has false alarms,
         else z_k (n_z, B) itself, as the paper's filters take it."""
@@ -159,17 +166,6 @@ class Setup:
 
     def intensity(self, sensor_id: str = PRIMARY) -> float:
         return intensity(self.cfg, sensor_id)
-
-    def check_live(self) -> None:
-        """Refuse, with a ValueError that says why, what the live services cannot carry yet:
-        a sensor that misses or reports false alarms (their messages hold one z_k per step)."""
-        detecting = [i for i in self.sensor_ids if not self.sensors[i].detection.trivial]
-        if detecting:
-            raise ValueError(
-                f"the detection process of {', '.join(detecting)} (pd, clutter_rate, fov) runs "
-                "in the engine only (tltrack experiment, tltrack study clutter): the live "
-                "services' measurement messages carry one z_k per step"
-            )
 
     @cached_property
     def P0(self) -> Array:

@@ -58,7 +58,7 @@ class TrackResult:
 def check_fit(setup: Setup, scans: ScanFile) -> None:
     """A sensor the config says detects every step with no false alarm (pd 1, no clutter) takes
     exactly one detection per step: refuse a file that has none or several, naming the step."""
-    for sid in setup.sensor_ids:
+    for sid in scans.detections:
         if not setup.sensors[sid].detection.trivial:
             continue
         counts = scans.counts(sid)
@@ -78,13 +78,8 @@ def statements(setup: Setup, scans: ScanFile, k: int) -> dict[str, Statement | N
     """What each sensor's filters take at step k (None: the scan was refused)."""
     out: dict[str, Statement | None] = {}
     for sid in setup.sensor_ids:
-        dets, own = scans.scan(sid, k), setup.sensors[sid]
-        if dets is None:
-            out[sid] = None
-        elif own.detection.trivial:
-            out[sid] = own.observe(dets.T)
-        else:
-            out[sid] = own.scan([dets])
+        dets = scans.scan(sid, k)
+        out[sid] = None if dets is None else setup.sensors[sid].report(dets)
     return out
 
 

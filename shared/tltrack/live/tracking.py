@@ -22,7 +22,7 @@ from tltrack.engine.driver import Link, Primaries, Sources, StepRecord, reported
 from tltrack.engine.montecarlo import check_filters
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import initial_estimate
-from tltrack.engine.setup import PRIMARY, Setup, from_spec
+from tltrack.engine.setup import PRIMARY, OwnSensor, Setup, from_spec
 from tltrack.filters import consistency
 from tltrack.filters.base import Array, Estimate
 from tltrack.live.held import Handling, Held
@@ -55,6 +55,13 @@ def transfer(msg: Transfer, source_id: str, layout: Layout) -> Observation:
     s = from_spec(msg.sensor, layout)
     obs = Observation.broadcast(s, np.asarray(msg.eta), np.asarray(msg.P_eta))
     return dataclasses.replace(obs, origin=source_id)
+
+
+def statement(own: OwnSensor, z: Measurement | None) -> Statement | None:
+    """What the filters take of a measurement message (None: it never came; they predict)."""
+    if z is None:
+        return None
+    return own.report(np.asarray(z.z, dtype=float).reshape(len(z.z), own.model.n_z))
 
 
 def wire_covariance(P: np.ndarray) -> np.ndarray:
@@ -172,11 +179,14 @@ class SourceEpisode:
     def n_z(self) -> int:
         return self.own.model.n_z
 
+    @property
+    def one_detection(self) -> bool:
+        return self.own.detection.trivial
+
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
         self.k += 1
-        obs = None if z is None else self.own.observe(np.asarray(z.z))
-        eta = self._half.step(self.k, {self.source_id: obs})[self._link]
+        eta = self._half.step(self.k, {self.source_id: statement(self.own, z)})[self._link]
         return self._estimates.pop(self.name), eta
 
     def transfer_message(self, eta: Observation, episode: str, k: int, t_sensor: float) -> Transfer:
@@ -221,16 +231,13 @@ class PrimaryEpisode:
         self._half = Primaries(setup, specs, x0_hat, [run], [self.monitor], share_twins=True)
         self._k = {self.tl_name: 0, self.iso_name: 0}
 
-    def _observe(self, z: Measurement | None) -> Observation | None:
-        return None if z is None else self.own.observe(np.asarray(z.z))
-
     def _step(self, name: str, z: Measurement | None, extra: list[Observation]) -> Estimate:
         self._k[name] += 1
 
         def feed(spec: FilterSpec) -> list[Statement]:
             return list(extra) if spec.role in ("tl", "robust") else []
 
-        return self._half.step(self._k[name], self._observe(z), feed, only=[name])[name]
+        return self._half.step(self._k[name], statement(self.own, z), feed, only=[name])[name]
 
     def step(self, z: Measurement | None, transfers: dict[str, Transfer]) -> Estimate:
         """The TL estimate at k; ``transfers`` maps source id -> its transfer for k. The isolated
@@ -265,6 +272,10 @@ class PrimaryEpisode:
     @property
     def n_z(self) -> int:
         return self.own.model.n_z
+
+    @property
+    def one_detection(self) -> bool:
+        return self.own.detection.trivial
 
     @property
     def names(self) -> tuple[str, str]:
@@ -347,6 +358,11 @@ class Tracked(Protocol):
 
     @property
     def n_z(self) -> int: ...
+
+    @property
+    def one_detection(self) -> bool:
+        """Does its sensor report exactly one detection per step (the paper's sensor)?"""
+        ...
 
 
 S = TypeVar("S")
@@ -450,7 +466,7 @@ class TrackedEpisodes(Episodes[E]):
         if ep is None:
             self.hold(e, key, lambda: self.offer(e, key, z, rejects), rejects)
             return
-        if len(z.z) != ep.n_z:
+        if any(len(d) != ep.n_z for d in z.z) or (ep.one_detection and len(z.z) != 1):
             rejects.add(key, "bad_shape")
             return
         verdict = ep.steps.offer(z.k, z)

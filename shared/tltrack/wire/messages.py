@@ -34,15 +34,19 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 from tltrack.config import SensorSpec
 from tltrack.models.kinds import MOTIONS, SENSORS
+from tltrack.models.scan import MAX_DETECTIONS
 
 #: 2: Truth and EstimateMsg carry ``pos``, the position in ``x`` (the referee needs no state
 #: layout), EstimateMsg whether the filter was reinitialised (``recovered``), a Transfer the
 #: sensor it is expressed in (``sensor``); sizes follow n_x and n_z.
 #: 3: EstimateMsg carries the NIS of the filter's own measurement, its window's mean and band
-SCHEMA_VERSION = 3
-SUPPORTED_VERSIONS = frozenset({3})
+#: 4: a Measurement carries a scan: ``z`` is a list of detections (the paper's sensor: one)
+SCHEMA_VERSION = 4
+SUPPORTED_VERSIONS = frozenset({4})
 
-MAX_PAYLOAD_BYTES = 64 * 1024  #: refused before unpacking
+#: refused before unpacking: room for a scan of MAX_DETECTIONS detections of 3 components
+#: (9 B per float64 in msgpack: 4096 * 3 * 9 = 110.6 kB)
+MAX_PAYLOAD_BYTES = 192 * 1024
 MAX_DEPTH = 12  #: nesting of maps/arrays (the config dict is the deepest: 3)
 SYMMETRY_RTOL = 1e-9
 MAX_K = 2**31 - 1  #: the largest step index a message may carry
@@ -66,6 +70,7 @@ REASONS = (
     "unknown_version",  # schema_version missing or not supported
     "wrong_type",  # type tag is not the expected message type
     "bad_shape",  # wrong vector/matrix dimensions
+    "scan_too_large",  # a scan of more than MAX_DETECTIONS detections
     "non_finite",  # NaN or infinity
     "not_symmetric",  # covariance asymmetric beyond SYMMETRY_RTOL
     "not_spd",  # covariance not positive-definite (Cholesky failed)
@@ -101,9 +106,11 @@ def _as_list(v: Any) -> Any:
 if TYPE_CHECKING:  # senders may pass NumPy arrays; at run time pydantic turns them into lists
     Vector = Any
     Matrix = Any
+    Vectors = Any
 else:
     Vector = Annotated[list[Finite], BeforeValidator(_as_list)]  #: list[float] on the wire
     Matrix = Annotated[list[list[Finite]], BeforeValidator(_as_list)]  #: list[list[float]]
+    Vectors = Annotated[list[Vector], BeforeValidator(_as_list)]  #: rows of any length
 
 
 def _check_vector(v: list[float], sizes: tuple[int, ...], name: str) -> list[float]:
@@ -206,18 +213,28 @@ class Message(BaseModel):
 
 
 class Measurement(Message):
-    """One sensor's measurement z_k of step k, in that sensor's components (its tracker checks
-    that the size is its sensor's)."""
+    """One sensor's scan at step k: every detection it reported (none, one, or up to
+    :data:`~tltrack.models.scan.MAX_DETECTIONS`), each in that sensor's components (its tracker
+    checks that the size is its sensor's, and that a sensor which always detects the target and
+    nothing else, the paper's, sent exactly one)."""
 
     TYPE: ClassVar[str] = "measurement"
     type: Literal["measurement"] = "measurement"
     sensor: Id
-    z: Vector
+    z: Vectors
 
     @field_validator("z")
     @classmethod
-    def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, measurement_sizes(), "z")
+    def _shape(cls, v: list[list[float]]) -> list[list[float]]:
+        if len(v) > MAX_DETECTIONS:
+            raise PydanticCustomError(
+                "scan_too_large", f"z has {len(v)} detections, at most {MAX_DETECTIONS}"
+            )
+        for i, d in enumerate(v):
+            _check_vector(d, measurement_sizes(), f"z[{i}]")
+        if len({len(d) for d in v}) > 1:
+            raise PydanticCustomError("bad_shape", "z's detections differ in size")
+        return v
 
 
 class Truth(Message):
@@ -412,7 +429,7 @@ def _unpack(payload: bytes) -> Any:
         max_str_len=min(n, 4096),
         max_bin_len=0,
         max_ext_len=0,
-        max_array_len=min(n, 1024),
+        max_array_len=n,  # a scan's thousands of detections; each entry takes a byte at least
         max_map_len=min(n, 256),
     )
 
