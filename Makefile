@@ -5,7 +5,7 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 PYTEST  := $(BIN)/pytest
 
-.PHONY: demo test check lint warm bench reproduce zenohd clean docs
+.PHONY: demo test check lint warm bench reproduce zenohd clean docs base-image
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -23,9 +23,16 @@ WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 
 ## Every test, on every core: unit, integration over real Zenoh, system (containers, the wheel,
 ## the browser, the golden worktree); ruff and mypy. The 25 slowest tests are listed at the end.
-test: $(STAMP)
+test: base-image $(STAMP)
 	$(MAKE) --no-print-directory -j2 lint warm  # each on a core of its own: two single-threaded jobs
 	$(PYTEST) -q -ra -n $(WORKERS) --dist loadgroup --durations=25
+
+## The container tests' base image, built in the background while the venv installs (a minute of
+## debootstrap off the longest chain of tests); scripts/build_image.sh waits for it. Nothing without
+## a Docker Engine; its log is build/base-image.log.
+base-image:
+	@if docker info >/dev/null 2>&1; then mkdir -p build; \
+	  nohup scripts/build_base_image.sh >build/base-image.log 2>&1 & fi
 
 ## The fast everyday subset: lint, types and the unit tier.
 check: $(STAMP) lint warm

@@ -22,6 +22,13 @@ die() { log "error: $*"; exit 1; }
 command -v docker >/dev/null 2>&1 || die "docker is not installed"
 docker info >/dev/null 2>&1 || die "cannot reach the Docker Engine (is the daemon running, may you use it?)"
 
+# One build at a time: `make test` starts one in the background while it installs the venv, and
+# the image's build (scripts/build_image.sh) then waits here for it instead of starting another.
+LOCK_DIR="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/build"
+mkdir -p "$LOCK_DIR"
+exec 9>"$LOCK_DIR/.base.lock"
+flock 9
+
 if [[ "${TLTRACK_REBUILD_BASE:-0}" != 1 ]] && docker image inspect "$IMAGE" >/dev/null 2>&1; then
     log "image $IMAGE already exists; skipping (TLTRACK_REBUILD_BASE=1 rebuilds it)"
     exit 0

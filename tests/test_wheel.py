@@ -3,9 +3,9 @@
 and ``tltrack demo`` run there from an unrelated directory, with access control on.
 
 The image is tests/test_compose.py's (built once per run, or reused while its sources are
-unchanged), so this module runs in the same test process (the xdist group ``compose``). It used
-to build its own wheelhouse and venv and compile the kernels cold: 3.5 minutes of a test process
-for what the image's build already does.
+unchanged): this module waits for its build, in a test process of its own (the xdist group
+``wheel``), off the compose tests' chain. It used to build its own wheelhouse and venv and compile
+the kernels cold: 3.5 minutes of a test process for what the image's build already does.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import subprocess
 import pytest
 from test_compose import ROOT, compose, image  # noqa: F401
 
-pytestmark = [pytest.mark.system, pytest.mark.timeout(300), pytest.mark.xdist_group("compose")]
+pytestmark = [pytest.mark.system, pytest.mark.timeout(1500), pytest.mark.xdist_group("wheel")]
 
 VENV = "/opt/venv"  #: where the Dockerfile installs the wheel
 
