@@ -20,6 +20,8 @@ from livestack import (
 )
 from tltrack.config import make_config
 from tltrack.engine.montecarlo import trace_run
+from tltrack.engine.scenario import simulate
+from tltrack.engine.setup import Setup
 from tltrack.live import latency, supervisor
 from tltrack.wire import keys
 from tltrack.wire.messages import SCHEMA_VERSION
@@ -28,11 +30,19 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 
 
 #: a primary radar that misses the target one scan in ten among 5 false alarms a scan, and a
-#: source that misses one in twenty
+#: source that misses one in ten among 0.5 (some of its scans are empty: two of this run's 30)
 CLUTTER = {
     "primary_detection": {"pd": 0.9, "clutter_rate": 5.0},
-    "sources": [{"id": "s1", "detection": {"pd": 0.95, "clutter_rate": 1.0}}],
+    "sources": [{"id": "s1", "detection": {"pd": 0.9, "clutter_rate": 0.5}}],
 }
+
+
+def _empty_scans(cfg) -> dict[str, int]:
+    """Each tracker's empty scans in run 0, as the scorer's summary names the trackers."""
+    scans = simulate(Setup(cfg), 0).scans
+    trackers = {"primary": "primary/primary_tracker", "s1": "source/s1/source_tracker"}
+    empty = {trackers[sid]: sum(len(d) == 0 for d in scans[sid].detections) for sid in trackers}
+    return {name: n for name, n in empty.items() if n}
 
 
 @pytest.mark.parametrize(
@@ -51,11 +61,6 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust, clutter):
         given = tmp_path / "clutter.json"
         given.write_text(json.dumps(CLUTTER))
         sim.append(f"--config={given}")
-    with stack(tmp_path) as s:
-        start_all(s, db, primary_env=primary_env, sim=sim)
-        assert s.wait("sensor_sim", 120) == 0, logs(s)
-        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
-        assert summary is not None, logs(s)
     cfg = make_config(
         preset="arasaratnam-haykin",
         truth="fixed",
@@ -65,6 +70,20 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust, clutter):
         recovery=True,  # the trackers' default, as the engine's is off
         **(CLUTTER if clutter else {}),
     )
+    with stack(tmp_path) as s:
+        start_all(s, db, primary_env=primary_env, sim=sim)
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
+        assert summary is not None, logs(s)
+        if clutter:  # each tracker counts the empty scans it stepped through; the scorer shows it
+            want = _empty_scans(cfg)
+            assert want, "no empty scan in this run: the check would prove nothing"
+
+            def shown() -> dict:
+                now = supervisor.wait_for_scored(s.endpoint, 1, 10)
+                return {} if now is None else now["messages"]["empty_scans"]
+
+            assert wait_until(lambda: shown() == want, 10), (shown(), want)
     offline = trace_run(cfg, [tl, "rpf", "source-rpf"], run=0)
     live = estimates(db)
     for name in (tl, "rpf", "source-rpf"):

@@ -205,6 +205,8 @@ class PrimaryTracker:
         ).publish(self.svc, keys.primary_estimate("tl", e))
         self._twin_later(e, ep, z)
         self.svc.count("steps")
+        if not z.z:
+            self.svc.count("empty_scans")
         self.svc.count("steps_with_transfer" if used else "steps_without_transfer")
         if tracker.rolled_back:
             self.svc.count("rollbacks_to_isolated")

@@ -168,11 +168,14 @@ class Summarizer:
                 ),
             }
         rejected: dict[str, dict[str, int]] = {}
+        empty: dict[str, int] = {}  #: scans with no detection each tracker stepped through
         dropped = 0
         for operator, service, _t, stats in self.store.rows("SELECT * FROM service_stats"):
             st = json.loads(stats)
             rejected[f"{operator}/{service}"] = st.get("rejected", {}).get("by_reason", {})
             dropped += int(st.get("dropped", 0))
+            if n := int(st.get("counters", {}).get("empty_scans", 0)):
+                empty[f"{operator}/{service}"] = n
         return {
             "episodes": [
                 {"episode": e, "run": r, "K": K, "complete": reason == "complete"}
@@ -186,5 +189,6 @@ class Summarizer:
                 "rejected_total": sum(sum(v.values()) for v in rejected.values()),
                 "dropped": dropped,
                 "missing_estimates": sum(f["gaps"] for f in filters.values()),
+                "empty_scans": empty,
             },
         }

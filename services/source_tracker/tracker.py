@@ -120,6 +120,8 @@ class SourceTracker:
             nis=ep.tracker.monitor.last.get(ep.tracker.name),
         ).publish(self.svc, keys.source_estimate(sid, e))
         self.svc.count("steps")
+        if not z.z:
+            self.svc.count("empty_scans")
 
 
 def main(argv: list[str] | None = None) -> None:
