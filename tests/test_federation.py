@@ -15,6 +15,7 @@ import shutil
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,7 +24,7 @@ from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
 from tltrack.config import Config, make_config
 from tltrack.engine.montecarlo import trace_run
-from tltrack.engine.scenario import measurements, truth
+from tltrack.engine.scenario import measurements, reports, truth
 from tltrack.engine.setup import Setup
 from tltrack.live import supervisor, topology
 from tltrack.wire import keys
@@ -37,8 +38,15 @@ K, N = 30, 500
 SIM = dict(preset="arasaratnam-haykin", truth="fixed", seed=7)
 
 
-def config(steps: int = K) -> Config:
-    return make_config(**SIM, K=steps, particles=N, recovery=True)  # recovery: the trackers'
+#: both radars in clutter (the relay test's episode): every detection is raw data
+CLUTTER = {
+    "primary_detection": {"pd": 0.9, "clutter_rate": 5.0},
+    "sources": [{"id": "s1", "detection": {"pd": 0.9, "clutter_rate": 3.0}}],
+}
+
+
+def config(steps: int = K, **more: Any) -> Config:
+    return make_config(**SIM, K=steps, particles=N, recovery=True, **more)  # recovery: trackers'
 
 
 @contextlib.contextmanager
@@ -82,8 +90,10 @@ def run_episode(
     pace: float,
     primary_env: dict[str, str] | None = None,
     sensor_env: dict[str, dict[str, str]] | None = None,
+    sim_config: Path | None = None,
 ) -> None:
-    """The scorer, the trackers and the sensors, then sensor_sim (routers already started)."""
+    """The scorer, the trackers and the sensors, then sensor_sim (routers already started);
+    ``sim_config``: a config file for the episodes, over the test's defaults."""
     s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
     s.start_service("primary_tracker", env=primary_env)
     s.start_service("source_tracker", identity="source-s1")
@@ -97,17 +107,22 @@ def run_episode(
     s.start_service(
         "sensor_sim",
         *sim_flags(steps, N, pace=pace),
+        *([f"--config={sim_config}"] if sim_config else []),
         env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait), "TLTRACK_SIM_WAIT_TIMEOUT_S": "60"},
     )
     assert steps == cfg.K
 
 
 def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(tmp_path):
-    """Also a slow link that costs no transfer: the primary's subscription reaches the source's
-    router 0.3 s late, long after the tokens sensor_sim awaits. The stack waits for that route
-    (Stack.wait_transfer_routes), so the source's first transfers are not dropped there and the
-    lock-step primary takes every step with a transfer."""
+    """Both radars in clutter: no detection of either (nor the truth) crosses a link between
+    routers, and the lock-step estimates are the engine's. Also a slow link that costs no transfer:
+    the primary's subscription reaches the source's router 0.3 s late, long after the tokens
+    sensor_sim awaits. The stack waits for that route (Stack.wait_transfer_routes), so the
+    source's first transfers are not dropped there and the lock-step primary takes every step
+    with a transfer."""
     db = tmp_path / "scorer.sqlite"
+    given = tmp_path / "clutter.json"
+    given.write_text(json.dumps(CLUTTER))
     with (
         federation(tmp_path, {("source/s1", "primary"): 0.3}) as (s, relays),
         Relay(s.topology.routers["source/s1"].endpoint) as tap,
@@ -121,15 +136,18 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
             0.0,
             primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"},
             sensor_env={"s1": {"TLTRACK_ZENOH_ENDPOINTS": json.dumps([tap.endpoint])}},
+            sim_config=given,
         )
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         live = every_step(db, s)
         wire = {link: r.bytes() for link, r in relays.items()}
         local = tap.bytes()
-    cfg = config()
+    cfg = config(**CLUTTER)
     x = truth(Setup(cfg), 0)
-    raw = {sid: sentinels(measurements(Setup(cfg), 0, x, sid)) for sid in ("primary", "s1")}
+    raw = {
+        sid: sentinels(np.concatenate(reports(Setup(cfg), 0, x, sid))) for sid in ("primary", "s1")
+    }
     assert found(raw["s1"], local) == len(raw["s1"]), "the sentinels are not what travels"
     # the source's link carried every step's transfer (each names its kind once)
     assert wire["source/s1", "primary"].count(b"\xa8transfer") >= K - 1
