@@ -11,7 +11,7 @@ filters. The NEES is exact too, collapsed clouds included: cb85efe already compu
 tree does (d109480 did not). No golden file is committed: numba and NumPy pick CPU-specific code,
 and one ulp there moves a resampled particle, so only two trees on one machine compare exactly.
 
-The matrix: four configs, each run at 300 particles, 3 runs, the full K = 100 steps, with three
+The matrix: four configs, each run at 300 particles, 5 runs, the full K = 100 steps, with three
 sources and every filter kind (pf, rpf, ukf, ckf3, ckf5) in every role (isolated, tl-, source-,
 fusion-pf, fusion-rpf, and robust-tl- unless a sensor is bearing-only, which it refuses: the last
 test checks that refusal, exit code 2, in both trees). Scenario, the primary's / sources' sensors:
@@ -177,7 +177,7 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> Any:
 def _start(shared: Path, config: Path, filters: list[str], out: Path) -> subprocess.Popen[str]:
     """``tltrack experiment`` with the package in ``shared`` (and nowhere else); log in ``out``."""
     argv = [*BELOW, sys.executable, "-m", "tltrack", "experiment", "--config", str(config)]
-    argv += ["--filters", ",".join(filters), "--particles", "300", "--runs", "3", "--seed", "2"]
+    argv += ["--filters", ",".join(filters), "--particles", "300", "--runs", "5", "--seed", "2"]
     argv += ["--workers", "1", "--out", str(out)]
     env = {**os.environ, "PYTHONPATH": str(shared), "MPLBACKEND": "Agg"}
     out.mkdir(parents=True)
