@@ -107,6 +107,23 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
     return cfg
 
 
+def filter_names(filters: str, cfg: Config) -> list[str]:
+    """``--filters`` as names, each known and each able to run with the config's sensors; exits
+    with the reason otherwise."""
+    from tltrack.engine.montecarlo import check_filters
+    from tltrack.engine.registry import parse
+
+    names = [n.strip() for n in filters.split(",") if n.strip()]
+    try:
+        for n in names:
+            parse(n, trusted=True)
+        check_filters(cfg, names)
+    except ValueError as err:
+        console.print(f"[red]error:[/red] --filters: {err}")
+        raise typer.Exit(2) from None
+    return names
+
+
 def _with_detection(
     cfg: Config, primary: dict[str, float | None], sources: dict[str, float | None]
 ) -> Config:

@@ -15,6 +15,7 @@ from tltrack.app.common import (
     build_config,
     console,
     engine_pool,
+    filter_names,
     progress_bar,
 )
 
@@ -92,8 +93,6 @@ def experiment(
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
     from tltrack.engine.experiment import run_and_save
-    from tltrack.engine.montecarlo import check_filters
-    from tltrack.engine.registry import parse
 
     cfg = build_config(
         config,
@@ -119,14 +118,7 @@ def experiment(
         recovery=recovery,
         rpf_bandwidth=rpf_bandwidth,
     )
-    names = [n.strip() for n in filters.split(",") if n.strip()]
-    try:
-        for n in names:
-            parse(n, trusted=True)
-        check_filters(cfg, names)
-    except ValueError as err:
-        console.print(f"[red]error:[/red] --filters: {err}")
-        raise typer.Exit(2) from None
+    names = filter_names(filters, cfg)
     with engine_pool(scheduler, workers) as executor, progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
         doc = run_and_save(

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
-from tltrack.app.common import app, build_config, console, progress_bar
+from tltrack.app.common import app, build_config, console, filter_names, progress_bar
 
 if TYPE_CHECKING:
     from tltrack.config import Config
@@ -57,8 +57,6 @@ def track(
     """
     from tltrack.config.truth_file import file_truth
     from tltrack.engine import results
-    from tltrack.engine.montecarlo import check_filters
-    from tltrack.engine.registry import parse
     from tltrack.engine.scan_file import ScanFileError, read_scans
     from tltrack.engine.setup import Setup
     from tltrack.engine.track import ScansDoNotFitError
@@ -77,14 +75,7 @@ def track(
         source_clutter_rate=source_clutter_rate,
         truth_file=truth_file,
     )
-    names = [n.strip() for n in filters.split(",") if n.strip()]
-    try:
-        for n in names:
-            parse(n, trusted=True)
-        check_filters(cfg, names)
-    except ValueError as err:
-        console.print(f"[red]error:[/red] --filters: {err}")
-        raise typer.Exit(2) from None
+    names = filter_names(filters, cfg)
     setup = Setup(cfg)
     try:
         recorded = read_scans(scans, {sid: setup.sensor(sid) for sid in setup.sensor_ids}, cfg.K)
