@@ -67,13 +67,7 @@ def trajectory(
     ax.plot(truth[-1, 0], truth[-1, 1], "kx", ms=9, label="end")
     for name, xy in tracks.items():
         ax.plot(xy[:, 0], xy[:, 1], lw=1, label=name, **_style(name))
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(title or "trajectory and estimates, run 0")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return _save(fig, path)
+    return _plan_view(fig, ax, path, title or "trajectory and estimates, run 0", "datalim")
 
 
 def scans_and_tracks(
@@ -104,13 +98,7 @@ def scans_and_tracks(
         pad = max(0.25 * float(np.max(hi - lo)), 300.0)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_title(title or "recorded scans and estimates")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    return _save(fig, path)
+    return _plan_view(fig, ax, path, title or "recorded scans and estimates", "box")
 
 
 def curves(
@@ -195,6 +183,17 @@ def distributions(
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3, axis="y")
+    return _save(fig, path)
+
+
+def _plan_view(fig: Any, ax: Any, path: Path, title: str, adjustable: str) -> Path:
+    """x-y in metres at one scale, titled, gridded, with a legend; saved to ``path``."""
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_aspect("equal", adjustable=adjustable)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
     return _save(fig, path)
 
 
