@@ -294,6 +294,7 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
         for r in topo.routers.values():
             cert = certs / "router.pem" if r is ref else signer / "router-primary.pem"
             s.start_operator_router(r.operator, _tls_env(certs / "ca.pem", cert))
+            s.wait_listening(f"router_{r.name}")
         tls = {
             "tls_root_ca": certs / "ca.pem",
             "tls_cert": certs / "sensor.pem",
@@ -306,7 +307,8 @@ def test_a_router_without_a_certificate_from_the_operators_ca_is_refused(tmp_pat
             Subscriber(prim_z, keys.EPISODES) as episodes,
             Publisher(ref_z, keys.episode("e1")) as pub,
         ):
-            deadline = time.monotonic() + 8
+            # a refusal waits it out; an admitted link ends it at its first announcement
+            deadline = time.monotonic() + 15
             while time.monotonic() < deadline and not episodes.received:
                 pub.put(b"an episode announcement")
                 time.sleep(0.2)
