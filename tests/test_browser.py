@@ -1,5 +1,6 @@
 """The dashboard in a real browser: headless Chromium (Debian's ``chromium`` and
-``chromium-driver``) driven by selenium watches a paced demo episode being drawn.
+``chromium-driver``) driven by selenium watches a paced demo episode in clutter being drawn: the
+tracks, and the primary's latest scan with its false alarms in light grey.
 
 A test tool's own browser download cannot work on these offline machines, so the browser comes
 from apt: installed here when missing (as root with apt-get), skipped with the reason otherwise.
@@ -9,6 +10,7 @@ also replaces the committed ``docs/dashboard.png``.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -32,6 +34,15 @@ ROOT = Path(__file__).resolve().parents[1]
 ARTIFACT = ROOT / "out" / "artifacts" / "dashboard.png"
 COMMITTED = ROOT / "docs" / "dashboard.png"
 K, PACE = 60, 10.0  # six seconds of episode: plenty of polls to see it grow
+#: false alarms over a sector around the track, so that some fall inside the plot every scan
+CLUTTER = {
+    "primary_detection": {
+        "pd": 0.9,
+        "clutter_rate": 10.0,
+        "fov": {"range_m": [1000.0, 7500.0], "bearing_rad": [-1.5, 1.0]},
+    }
+}
+CLUTTER_RGB = (196, 201, 209)  # dashboard.js's CLUTTER_COLOR, #c4c9d1
 
 PAGE_STATE = """
 const q = (sel) => Array.from(document.querySelectorAll(sel));
@@ -42,6 +53,8 @@ return {
   filters: Object.fromEntries(q("#rmse-table tbody tr[data-filter]").map(
     (r) => [r.dataset.filter, Number(r.cells[2].textContent)])),
   alive: q("#health li[data-alive='true']").map((li) => li.dataset.service),
+  scan: Object.fromEntries(Object.entries(document.getElementById("scan-drawn").dataset)
+    .map(([name, v]) => [name, Number(v)])),
 };
 """
 
@@ -108,8 +121,12 @@ def _until(pred: Callable[[], Any], timeout: float, what: str, diag: Callable[[]
 
 
 @pytest.mark.timeout(90, func_only=True)  # the one-off apt install is in the fixture, not here
-def test_the_page_draws_the_episode_as_it_runs(tmp_path: Path, browser: Any) -> None:
+def test_the_page_draws_the_episode_and_its_clutter_as_it_runs(
+    tmp_path: Path, browser: Any
+) -> None:
     port = supervisor.free_port()
+    given = tmp_path / "clutter.json"
+    given.write_text(json.dumps(CLUTTER))
     with stack(tmp_path) as s:
         s.start_router()
         s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(tmp_path / "scorer.sqlite")})
@@ -121,7 +138,8 @@ def test_the_page_draws_the_episode_as_it_runs(tmp_path: Path, browser: Any) -> 
                 assert w.wait_until(keys.alive(*who.split(":")), True, 60), f"{who}\n{logs(s)}"
         assert launch.wait_ready(page, 10), logs(s)
         browser.get(page)
-        s.start_service("sensor_sim", *sim_flags(K, 500, pace=PACE), env=launch.sim_env())
+        flags = [*sim_flags(K, 500, pace=PACE), "--config", str(given)]
+        s.start_service("sensor_sim", *flags, env=launch.sim_env())
 
         def look() -> dict[str, Any]:
             """What the page shows, read in one script: the DOM is rebuilt on every poll."""
@@ -143,6 +161,18 @@ def test_the_page_draws_the_episode_as_it_runs(tmp_path: Path, browser: Any) -> 
         assert rmse_text() != rmse_first, "the RMSE did not change as steps arrived"
 
         _until(lambda: drawn() >= K // 2, 20, "half the episode", diag)
+        scan = _until(lambda: look()["scan"]["clutter"] and look()["scan"], 10, "clutter", diag)
+        assert scan["k"] > first, scan
+        grey = browser.execute_script(
+            "const [r, g, b] = arguments[0];"
+            "const c = document.getElementById('trajectory');"
+            "const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;"
+            "let n = 0; for (let i = 0; i < d.length; i += 4)"
+            "  if (d[i] === r && d[i + 1] === g && d[i + 2] === b) n++;"
+            "return n;",
+            list(CLUTTER_RGB),
+        )
+        assert grey > 0, f"no false alarm in the plot's pixels, though the page counts {scan}"
         ARTIFACT.parent.mkdir(parents=True, exist_ok=True)
         assert browser.save_screenshot(str(ARTIFACT))
         if os.environ.get("TLTRACK_UPDATE_SCREENSHOT") == "1":

@@ -170,6 +170,17 @@ def test_replays_and_floods_stay_bounded_and_are_counted():
 
 
 @pytest.mark.unit
+def test_the_page_gets_the_latest_steps_scan_with_its_false_alarms():
+    state = State()
+    for k, scan, fake in [(2, [[5.0, 6.0], [7.0, 8.0]], [False, True]), (1, [[0.0, 0.0]], [True])]:
+        state.on_truth(truth(k, 0.0, 0.0).model_copy(update={"scan": scan, "scan_clutter": fake}))
+    # the late step 1 changes nothing: the page shows the latest scan
+    assert state.snapshot()["episode"]["scan"] == {"k": 2, "points": [[5.0, 6.0, 0], [7.0, 8.0, 1]]}
+    state.on_truth(truth(3, 0.0, 0.0))  # nothing detected at step 3: an empty scan, drawn as none
+    assert state.snapshot()["episode"]["scan"] == {"k": 3, "points": []}
+
+
+@pytest.mark.unit
 def test_many_steps_are_thinned_for_the_page_keeping_the_last():
     state = State(max_points=10)
     for k in range(1, 101):
@@ -363,6 +374,8 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
 
     ep = snap["episode"]
     assert (ep["id"], ep["K"], ep["last_k"], len(ep["truth"])) == (E, K, K, K)
+    # the referee's own draw of the primary's last scan: the paper's sensor, one detection
+    assert ep["scan"]["k"] == K and [p[2] for p in ep["scan"]["points"]] == [0], ep["scan"]
     scored = summary["filters"]
     assert {f["name"] for f in ep["filters"]} == set(scored) == {"source-rpf", "tl-rpf", "rpf"}
     for f in ep["filters"]:

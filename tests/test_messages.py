@@ -538,3 +538,21 @@ def test_a_measurement_carries_a_scan_of_up_to_4096_detections() -> None:
     d = raw(full)
     d["z"] = d["z"] + [[1.0, 2.0, 3.0]]
     assert reject(pack(d), Measurement) == "scan_too_large"
+
+
+def test_a_truth_carries_the_simulated_scan_one_flag_per_detection() -> None:
+    """The referee's picture of the primary's scan: positions and which are false alarms, bounded
+    like a scan; a flag too few, a detection that is no position, or one too many is refused."""
+    rng = np.random.default_rng(0)
+    xy = rng.normal(size=(MAX_DETECTIONS, 2))
+    full = Truth(**COMMON, k=2, x=[1.0, 2.0, 3.0, 4.0], pos=[1.0, 3.0], scan=xy,
+                 scan_clutter=[True] * MAX_DETECTIONS)  # fmt: skip
+    assert decode(encode(full), Truth) == full
+    d = raw(full)
+    for change, reason in [
+        ({"scan_clutter": [True] * (MAX_DETECTIONS - 1)}, "bad_shape"),
+        ({"scan": [[1.0, 2.0, 3.0]] * MAX_DETECTIONS}, "bad_shape"),
+        ({"scan": d["scan"] + [[0.0, 0.0]], "scan_clutter": d["scan_clutter"] + [False]},
+         "scan_too_large"),
+    ]:  # fmt: skip
+        assert reject(pack({**d, **change}), Truth) == reason, change

@@ -109,6 +109,8 @@ class Episode:
     sensors: dict[str, tuple[XY, str]] = field(default_factory=dict)  #: id -> (where, kind)
     truth: dict[int, XY] = field(default_factory=dict)
     tracks: dict[str, Track] = field(default_factory=dict)
+    #: the latest step's scan of the primary as the simulation drew it: k, (x, y, is_clutter)
+    scan: tuple[int, list[tuple[float, float, bool]]] = (0, [])
 
 
 @dataclass(frozen=True)
@@ -225,6 +227,11 @@ class State:
             if len(ep.truth) >= self.max_steps:
                 return "capacity", []
             ep.truth[m.k] = t = _xy(m.pos)
+            if m.k > ep.scan[0]:
+                ep.scan = (
+                    m.k,
+                    [(x, y, c) for (x, y), c in zip(m.scan, m.scan_clutter, strict=True)],
+                )
             updates = []
             for name, tr in ep.tracks.items():
                 if m.k in tr.pos:
@@ -392,6 +399,7 @@ class State:
                 for n, (p, kind) in ep.sensors.items()
             ],
             "truth": [[truth[i][0], *truth[i][1]] for i in _thin(len(truth), self.max_points)],
+            "scan": {"k": ep.scan[0], "points": [[x, y, int(c)] for x, y, c in ep.scan[1]]},
             "filters": filters,
             "transfer": transfer,
         }

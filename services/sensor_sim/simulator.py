@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack.config import Config, load_config
-from tltrack.engine.scenario import simulate
+from tltrack.engine.scenario import Run, simulate
+from tltrack.engine.scene import primary_scan
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
 from tltrack.live.service import Service, load_settings, setup_logging
@@ -92,7 +93,7 @@ class Settings(BaseSettings):
 class Simulator:
     def __init__(self, settings: Settings, cfg: Config, svc: Service) -> None:
         self.s, self.cfg, self.svc = settings, cfg, svc
-        setup = Setup(cfg)
+        self.setup = setup = Setup(cfg)
         self.layout = setup.layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
         if settings.replay_csv and not settings.measurements:
@@ -129,12 +130,11 @@ class Simulator:
     def run_episode(self, i: int) -> None:
         run = self.s.first_run + i
         e = f"{self.s.episode_prefix}-r{run}"
-        if self.recorded is None:
-            sim = simulate(Setup(self.cfg), run)
+        sim = None if self.recorded is not None else simulate(self.setup, run)
+        if sim is not None:
             scans = [{sid: sim.detections(sid, k) for sid in self.sensors} for k in self.steps]
-            truth: NDArray[np.float64] | None = sim.truth
         else:
-            scans, truth = self.recorded, None
+            scans = self.recorded or []
         start = EpisodeStart(
             episode=e,
             sender=NAME,
@@ -152,16 +152,31 @@ class Simulator:
             # Every service opens the episode first; a sensor regenerates its truth from the
             # seeds (58 ms at K = 5000). Ticks sent meanwhile would queue behind that work.
             self.svc.stop.wait(self.s.lead_s)
-            self._publish_steps(e, scans, truth)
+            self._publish_steps(e, scans, sim)
+
+    def _truth(self, e: str, k: int, t: float, sim: Run) -> Truth:
+        x = sim.truth[k]
+        drawn = primary_scan(self.setup, sim, k)
+        return Truth(
+            episode=e,
+            sender=NAME,
+            k=k,
+            t_sensor=t,
+            x=x,
+            pos=self.layout.position(x),
+            scan=drawn[0] if drawn else [],
+            scan_clutter=drawn[1].tolist() if drawn else [],
+        )
 
     @property
     def steps(self) -> range:
         return range(1, self.cfg.K + 1)
 
     def _publish_steps(
-        self, e: str, scans: list[dict[str, NDArray[np.float64]]], truth: NDArray[np.float64] | None
+        self, e: str, scans: list[dict[str, NDArray[np.float64]]], sim: Run | None
     ) -> None:
-        """Step k's tick, truth and each sensor's scan (``scans[k - 1]``) on its owner's key."""
+        """Step k's tick, truth (with the primary's scan as drawn) and each sensor's scan
+        (``scans[k - 1]``) on its owner's key."""
         t_next = time.monotonic()
         for k in range(1, self.cfg.K + 1):
             if self.svc.stop.is_set():
@@ -169,11 +184,8 @@ class Simulator:
             t_next += self.period
             t = time.time()
             self.svc.publish(keys.clock(e), Tick(episode=e, sender=NAME, k=k, t_sensor=t))
-            if truth is not None:
-                x, pos = truth[k], self.layout.position(truth[k])
-                self.svc.publish(
-                    keys.truth(e), Truth(episode=e, sender=NAME, k=k, t_sensor=t, x=x, pos=pos)
-                )
+            if sim is not None:
+                self.svc.publish(keys.truth(e), self._truth(e, k, t, sim))
             for sid in self.sensors:
                 key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
                 self.svc.publish(

@@ -5,6 +5,7 @@
 const ROLE_COLORS = { source: ["#2ca02c", "#17becf"], tl: ["#1f77b4", "#9467bd"],
                       isolated: ["#ff7f0e", "#d62728"] };
 const TRUTH_COLOR = "#111827";
+const DETECTION_COLOR = "#6b7280", CLUTTER_COLOR = "#c4c9d1";
 const ROLE_LABEL = { source: "source", tl: "primary TL", isolated: "primary isolated" };
 
 let pollMs = 250;
@@ -161,11 +162,16 @@ function legend(ctx, f, items, px) {
   ctx.strokeRect(x0, y0, lw, lh);
   items.forEach((it, i) => {
     const y = y0 + 13 + i * 18;
-    ctx.strokeStyle = it.color;
-    ctx.lineWidth = it.width || 2;
-    ctx.setLineDash(it.dash || []);
-    ctx.beginPath(); ctx.moveTo(x0 + 6, y); ctx.lineTo(x0 + 28, y); ctx.stroke();
-    ctx.setLineDash([]);
+    if (it.dot) {
+      ctx.fillStyle = it.color;
+      ctx.beginPath(); ctx.arc(x0 + 17, y, 3, 0, 2 * Math.PI); ctx.fill();
+    } else {
+      ctx.strokeStyle = it.color;
+      ctx.lineWidth = it.width || 2;
+      ctx.setLineDash(it.dash || []);
+      ctx.beginPath(); ctx.moveTo(x0 + 6, y); ctx.lineTo(x0 + 28, y); ctx.stroke();
+      ctx.setLineDash([]);
+    }
     ctx.fillStyle = "#111827";
     ctx.textAlign = "left";
     ctx.textBaseline = "middle";
@@ -175,8 +181,28 @@ function legend(ctx, f, items, px) {
   return c.i;
 }
 
+// The primary's latest scan as the simulation drew it, as dots clipped to the box: false alarms
+// light grey under the target's detections in dark grey. How many of each the box shows.
+function scanDots(ctx, pts, X, Y, box, r) {
+  const shown = { detections: 0, clutter: 0 };
+  ctx.save();
+  ctx.beginPath(); ctx.rect(box.x, box.y, box.w, box.h); ctx.clip();
+  for (const fake of [1, 0]) {
+    ctx.fillStyle = fake ? CLUTTER_COLOR : DETECTION_COLOR;
+    for (const [x, y, c] of pts) {
+      if (c !== fake) continue;
+      const px = X(x), py = Y(y);
+      if (px < box.x || px > box.x + box.w || py < box.y || py > box.y + box.h) continue;
+      ctx.beginPath(); ctx.arc(px, py, r, 0, 2 * Math.PI); ctx.fill();
+      shown[fake ? "clutter" : "detections"] += 1;
+    }
+  }
+  ctx.restore();
+  return shown;
+}
+
 // A zoomed view around the latest true position, where the filters' differences show.
-function inset(ctx, f, series, colors, px, taken) {
+function inset(ctx, f, series, colors, px, taken, scan) {
   const truth = series.find((s) => s.name === "truth");
   if (!truth || truth.pts.length === 0) return;
   const w = Math.min(240, f.pw * 0.42), h = Math.min(190, f.ph * 0.45);
@@ -199,6 +225,7 @@ function inset(ctx, f, series, colors, px, taken) {
   ctx.beginPath();
   ctx.rect(c.x, c.y, w, h);
   ctx.clip();
+  scanDots(ctx, scan, X, Y, { x: c.x, y: c.y, w, h }, 3);
   for (const s of series) {
     const isTruth = s.name === "truth";
     polyline(ctx, s.pts.slice(-12), X, Y, isTruth ? TRUTH_COLOR : colors[s.name],
@@ -222,14 +249,17 @@ function emptyNote(ctx, w, h, text) {
 
 // ---- the plots ------------------------------------------------------------------------------
 
+// The trajectories, the sensors and the latest scan; what it drew: steps and the scan's dots.
+// The axes follow the tracks, not the clutter, which may fill the whole field of view.
 function drawTrajectory(ep, colors) {
   const { ctx, w, h } = setupCanvas($("trajectory"));
+  const none = { steps: 0, k: 0, scan: { detections: 0, clutter: 0 } };
   const series = ep ? [{ name: "truth", pts: ep.truth.map((p) => [p[1], p[2]]) },
     ...ep.filters.map((f) => ({ name: f.name, role: f.role, pts: f.points.map((p) => [p[1], p[2]]) }))] : [];
   const all = series.flatMap((s) => s.pts).concat(ep ? ep.sensors.map((s) => [s.x, s.y]) : []);
   if (!ep || series.every((s) => s.pts.length === 0)) {
     emptyNote(ctx, w, h, "waiting for the first step…");
-    return 0;
+    return none;
   }
   let [x0, x1] = [Math.min(...all.map((p) => p[0])), Math.max(...all.map((p) => p[0]))];
   let [y0, y1] = [Math.min(...all.map((p) => p[1])), Math.max(...all.map((p) => p[1]))];
@@ -257,6 +287,8 @@ function drawTrajectory(ep, colors) {
     ctx.fill();
     ctx.fillText(`sensor ${site.names.join(", ")}`, px + 9, py);
   }
+  const scan = ep.scan ? ep.scan.points : [];
+  const shown = scanDots(ctx, scan, f.X, f.Y, { x: f.m.l, y: f.m.t, w: f.pw, h: f.ph }, 2.5);
   const items = [];
   let drawn = 0;
   for (const s of series) {
@@ -267,10 +299,12 @@ function drawTrajectory(ep, colors) {
     items.push({ label: isTruth ? "truth" : `${s.name} (${ROLE_LABEL[s.role] || s.role})`,
                  color, width: isTruth ? 2.5 : 1.6, dash: isTruth ? [6, 4] : null });
   }
+  if (scan.some((p) => !p[2])) items.push({ label: `detections, step ${ep.scan.k}`, color: DETECTION_COLOR, dot: true });
+  if (scan.some((p) => p[2])) items.push({ label: "false alarms", color: CLUTTER_COLOR, dot: true });
   const px = all.map(([x, y]) => [f.X(x), f.Y(y)]);
   const taken = legend(ctx, f, items, px);
-  inset(ctx, f, series, colors, px, taken);
-  return drawn;
+  inset(ctx, f, series, colors, px, taken, scan);
+  return { steps: drawn, k: ep.scan ? ep.scan.k : 0, scan: shown };
 }
 
 function drawRmse(ep, colors) {
@@ -438,19 +472,30 @@ function fillHeader(snap) {
     : "used / skipped per step of the TL filter";
 }
 
+// What the plot shows of the latest scan, in words (and in data-* for the browser test).
+function fillScan(drawn) {
+  const out = $("scan-drawn");
+  const { detections, clutter } = drawn.scan;
+  out.textContent = drawn.k ? `step ${drawn.k}: target ${detections}, false alarms ${clutter}` : "–";
+  out.dataset.k = String(drawn.k);
+  out.dataset.detections = String(detections);
+  out.dataset.clutter = String(clutter);
+}
+
 function render(snap) {
   const ep = snap.episode;
   const colors = colorsFor(ep ? ep.filters : []);
   fillHeader(snap);
   const drawn = drawTrajectory(ep, colors);
+  fillScan(drawn);
   drawRmse(ep, colors);
   drawTransfer(ep);
   fillFilters(ep, colors);
   fillHealth(snap.services);
   fillRejected(snap);
   const counter = $("steps-drawn");
-  counter.textContent = String(drawn);
-  counter.dataset.steps = String(drawn);
+  counter.textContent = String(drawn.steps);
+  counter.dataset.steps = String(drawn.steps);
   document.body.dataset.version = String(snap.version);
 }
 

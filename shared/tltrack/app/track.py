@@ -170,10 +170,10 @@ def _draw(
     """The primary's detections (when its sensor fixes a position) under the primary filters'
     estimates, and the truth when there is one."""
     from tltrack.engine.plots import scans_and_tracks
+    from tltrack.engine.scene import plan
     from tltrack.engine.setup import PRIMARY
-    from tltrack.filters.decision import PositionFix
 
-    layout, sensor = setup.layout, setup.sensor(PRIMARY)
+    layout = setup.layout
     tracks: dict[str, list[np.ndarray]] = {}
     for _k, name, x, _P in estimates:
         if not name.startswith("source-"):
@@ -181,12 +181,12 @@ def _draw(
     dets: np.ndarray | None = None
     labels: np.ndarray | None = None
     steps = [k for k, d in enumerate(recorded.detections[PRIMARY]) if d is not None and len(d)]
-    if isinstance(sensor, PositionFix) and steps:
-        z = np.concatenate([recorded.detections[PRIMARY][k] for k in steps]).T
-        no_noise = np.zeros((z.shape[1], sensor.n_z, sensor.n_z))
-        dets = sensor.to_position(z, no_noise)[0].T
+    if steps:
+        dets = plan(
+            setup.sensor(PRIMARY), np.concatenate([recorded.detections[PRIMARY][k] for k in steps])
+        )
         known = [recorded.is_clutter[PRIMARY][k] for k in steps]
-        if all(c is not None for c in known):
+        if dets is not None and all(c is not None for c in known):
             labels = np.concatenate(known)  # type: ignore[arg-type]
     xy = None if truth is None else layout.position(truth.T).T
     return scans_and_tracks(dets, labels, {n: np.array(v) for n, v in tracks.items()}, path, xy)

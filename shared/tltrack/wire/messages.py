@@ -41,8 +41,9 @@ from tltrack.models.scan import MAX_DETECTIONS
 #: sensor it is expressed in (``sensor``); sizes follow n_x and n_z.
 #: 3: EstimateMsg carries the NIS of the filter's own measurement, its window's mean and band
 #: 4: a Measurement carries a scan: ``z`` is a list of detections (the paper's sensor: one)
-SCHEMA_VERSION = 4
-SUPPORTED_VERSIONS = frozenset({4})
+#: 5: a Truth carries the primary's scan as the simulation drew it (``scan``, ``scan_clutter``)
+SCHEMA_VERSION = 5
+SUPPORTED_VERSIONS = frozenset({5})
 
 #: refused before unpacking: room for a scan of MAX_DETECTIONS detections of 3 components
 #: (9 B per float64 in msgpack: 4096 * 3 * 9 = 110.6 kB)
@@ -238,12 +239,19 @@ class Measurement(Message):
 
 
 class Truth(Message):
-    """The true state x_k and its position (referee data)."""
+    """The true state x_k and its position (referee data). In a simulated episode it also
+    carries the primary's scan at k as the referee's simulation drew it, as positions, with
+    which are false alarms (``scan_clutter``): the dashboard draws it. The referee made those
+    detections; no operator's measurement is read for it (in the federated topology each operator
+    draws its own, from the same seeds). Empty in a replay, or when the primary's sensor fixes no
+    position."""
 
     TYPE: ClassVar[str] = "truth"
     type: Literal["truth"] = "truth"
     x: Vector
     pos: Vector
+    scan: Vectors = Field(default_factory=list)
+    scan_clutter: list[bool] = Field(default_factory=list)
 
     @field_validator("x")
     @classmethod
@@ -255,6 +263,26 @@ class Truth(Message):
     def _pos_shape(cls, v: list[float]) -> list[float]:
         return _check_vector(v, (2,), "pos")
 
+
+    @field_validator("scan")
+    @classmethod
+    def _scan_shape(cls, v: list[list[float]]) -> list[list[float]]:
+        if len(v) > MAX_DETECTIONS:
+            raise PydanticCustomError(
+                "scan_too_large", f"scan has {len(v)} detections, at most {MAX_DETECTIONS}"
+            )
+        for i, d in enumerate(v):
+            _check_vector(d, (2,), f"scan[{i}]")
+        return v
+
+    @model_validator(mode="after")
+    def _one_flag_per_detection(self) -> Truth:
+        if len(self.scan_clutter) != len(self.scan):
+            raise PydanticCustomError(
+                "bad_shape",
+                f"scan_clutter has {len(self.scan_clutter)} flags for {len(self.scan)} detections",
+            )
+        return self
 
 class Transfer(Message):
     """The source's predicted-observation density N(eta, P_eta) for step ``k_apply``, in the
