@@ -154,11 +154,16 @@ def test_a_bad_row_refuses_the_file_naming_its_line(recorded, tmp_path, row, say
     assert says.replace(" ", "") in "".join(done.output.split()), done.output  # wrapped anywhere
 
 
-def test_a_sensor_the_config_says_is_clean_takes_one_detection_per_step(recorded) -> None:
+def test_a_sensor_the_config_says_is_clean_takes_one_detection_per_step(recorded, tmp_path) -> None:
     _cfg, _run, path = recorded
     clean = make_config(preset="arasaratnam-haykin", K=25)
     with pytest.raises(ScansDoNotFitError, match=r"step \d+ of sensor 'primary' has \d+ detect"):
         track(clean, ["rpf"], read_scans(path, sensors(clean), clean.K))
+    out = tmp_path / "out"
+    args = ["track", "--scans", str(path), "--preset", "arasaratnam-haykin", "--steps", "25"]
+    done = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert done.exit_code == 2 and "detect" in done.output, done.output
+    assert "steps" not in done.output and not out.exists(), "refused after a progress bar"
 
 
 def test_with_a_truth_file_track_writes_the_scores_of_its_estimates(tmp_path: Path) -> None:

@@ -59,7 +59,7 @@ def track(
     from tltrack.engine import results
     from tltrack.engine.scan_file import ScanFileError, read_scans
     from tltrack.engine.setup import Setup
-    from tltrack.engine.track import ScansDoNotFitError
+    from tltrack.engine.track import ScansDoNotFitError, check_fit
     from tltrack.engine.track import track as run_track
 
     cfg = build_config(
@@ -79,7 +79,8 @@ def track(
     setup = Setup(cfg)
     try:
         recorded = read_scans(scans, {sid: setup.sensor(sid) for sid in setup.sensor_ids}, cfg.K)
-    except ScanFileError as err:
+        check_fit(setup, recorded)  # before the progress bar: a file refused draws none
+    except (ScanFileError, ScansDoNotFitError) as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
     for reason in recorded.refused:
@@ -87,11 +88,7 @@ def track(
     truth = file_truth(cfg) if cfg.truth == "file" else None
     with progress_bar(cfg.K, "steps") as bar:
         task = bar.add_task("steps", total=cfg.K)
-        try:
-            done = run_track(cfg, names, recorded, truth, lambda: bar.advance(task))
-        except ScansDoNotFitError as err:
-            console.print(f"[red]error:[/red] {err}")
-            raise typer.Exit(2) from None
+        done = run_track(cfg, names, recorded, truth, lambda: bar.advance(task))
     out.mkdir(parents=True, exist_ok=True)
     _write_estimates(out / "estimates.csv", cfg, done.tracks.estimates)
     _write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
