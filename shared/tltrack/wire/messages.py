@@ -263,7 +263,6 @@ class Truth(Message):
     def _pos_shape(cls, v: list[float]) -> list[float]:
         return _check_vector(v, (2,), "pos")
 
-
     @field_validator("scan")
     @classmethod
     def _scan_shape(cls, v: list[list[float]]) -> list[list[float]]:
@@ -283,6 +282,7 @@ class Truth(Message):
                 f"scan_clutter has {len(self.scan_clutter)} flags for {len(self.scan)} detections",
             )
         return self
+
 
 class Transfer(Message):
     """The source's predicted-observation density N(eta, P_eta) for step ``k_apply``, in the
