@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tltrack.config import make_config
+from tltrack.config import LinkSpec, make_config
 from tltrack.engine.driver import Direct, Driver, Lossy, StepRecord, effective_sample_size
 from tltrack.engine.montecarlo import Scores, run_batch
 from tltrack.engine.scenario import simulate
@@ -70,34 +70,66 @@ def _means(records: list[StepRecord]) -> np.ndarray:
     return np.stack([r.estimate.mean for r in records])
 
 
-def test_a_link_that_loses_every_transfer_leaves_tl_exactly_the_isolated_filter() -> None:
-    """Common random numbers: TL with nothing delivered is the isolated filter, bit for bit."""
-    lost = _steps(Lossy(RUNS, seed=1, drop=1.0), ["pf", "tl-pf"])
-    np.testing.assert_array_equal(_means(lost["tl-pf"]), _means(lost["pf"]))
-    assert all(r.used is None for r in lost["tl-pf"])  # nothing was ever delivered
+def _link(seed: int = 1, **spec: float) -> Lossy:
+    return Lossy(RUNS, seed, {"s1": LinkSpec(**spec)}, CFG.Ts)
 
 
-def test_a_perfect_lossy_link_is_the_direct_one_and_a_lossy_one_is_seeded() -> None:
+def _used(records: list[StepRecord]) -> np.ndarray:
+    """Per step and run: did the update use a transfer."""
+    return np.array([np.zeros(len(RUNS), bool) if r.used is None else r.used for r in records])
+
+
+@pytest.mark.parametrize(
+    ("spec", "counter"),
+    [({"loss": 1.0}, "lost"), ({"delay_s": 1.3, "deadline_s": 0.25}, "late")],
+    ids=["every-transfer-lost", "every-transfer-late"],
+)
+def test_a_link_that_delivers_nothing_leaves_tl_exactly_the_isolated_filter(spec, counter) -> None:
+    """Common random numbers: TL with nothing delivered is the isolated filter, bit for bit; a
+    transfer past the primary's deadline is refused and counted, never used at a later step."""
+    link = _link(**spec)
+    got = _steps(link, ["pf", "tl-pf"])
+    np.testing.assert_array_equal(_means(got["tl-pf"]), _means(got["pf"]))
+    assert not _used(got["tl-pf"]).any()
+    made = CFG.K  # a transfer per step, for k = 2 .. K + 1
+    assert getattr(link, counter)["s1"].tolist() == [made] * len(RUNS)
+    other = "late" if counter == "lost" else "lost"
+    assert getattr(link, other)["s1"].tolist() == [0] * len(RUNS)
+
+
+def test_a_perfect_link_is_the_direct_one_and_a_lossy_one_is_seeded() -> None:
     direct = _steps(Direct(), ["tl-pf"])["tl-pf"]
-    perfect = _steps(Lossy(RUNS, seed=1), ["tl-pf"])["tl-pf"]
-    np.testing.assert_array_equal(_means(perfect), _means(direct))
-    a = _steps(Lossy(RUNS, seed=1, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
-    b = _steps(Lossy(RUNS, seed=1, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
-    c = _steps(Lossy(RUNS, seed=2, drop=0.3, delay=1, jitter=2), ["tl-pf"])["tl-pf"]
+    on_time = _steps(_link(delay_s=1.2, deadline_s=0.25), ["tl-pf"])["tl-pf"]  # within Ts + 0.25
+    np.testing.assert_array_equal(_means(on_time), _means(direct))
+    lossy = {"loss": 0.3, "delay_s": 1.0, "jitter_s": 0.5, "deadline_s": 0.25}
+    a = _steps(_link(1, **lossy), ["tl-pf"])["tl-pf"]
+    b = _steps(_link(1, **lossy), ["tl-pf"])["tl-pf"]
+    c = _steps(_link(2, **lossy), ["tl-pf"])["tl-pf"]
     np.testing.assert_array_equal(_means(a), _means(b))
     assert not np.array_equal(_means(a), _means(c))
-    used = np.array([np.zeros(len(RUNS), bool) if r.used is None else r.used for r in a])
-    assert 0.2 < used[2:].mean() < 0.9  # about 70% arrive, some too late to be newest
+    # 70% are not lost, and half of those arrive in time (1 + U(0, 0.5) s <= 1.25 s)
+    assert 0.15 < _used(a)[1:].mean() < 0.6
 
 
-def test_a_late_transfer_overtaken_by_a_newer_one_is_discarded() -> None:
+def test_a_transfer_is_taken_only_at_its_own_step_and_only_by_the_runs_it_reached() -> None:
     setup = Setup(CFG)
-    z = setup.sensors["s1"].observe(np.zeros((2, 2)))
-    ch = Lossy([0, 1], seed=0, delay=0, jitter=0)
-    ch.send(("source-pf", "s1"), 2, z)
-    ch.send(("source-pf", "s1"), 3, z)
-    assert ch.receive(("source-pf", "s1"), 3) is not None  # the newest, made for 3
-    assert ch.receive(("source-pf", "s1"), 4) is None  # the one for 2 is older: never taken
+    z = setup.sensors["s1"].observe(np.zeros((2, len(RUNS))))
+    link = _link(3, loss=0.5)
+    for k_apply in range(2, 12):
+        link.send(("source-pf", "s1"), k_apply, z)
+        got = link.receive(("source-pf", "s1"), k_apply)
+        reached = link.reached["s1", k_apply]
+        assert (got is None) == (not reached.any())
+        assert got is None or got.mask.tolist() == reached.tolist()
+        assert link.receive(("source-pf", "s1"), k_apply + 1) is None  # never at a later step
+    assert 0 < link.lost["s1"].sum() < 10 * len(RUNS)
+
+
+def test_a_stale_source_has_no_link_of_its_own() -> None:
+    with pytest.raises(ValueError, match="stale source's lateness is its fault"):
+        make_config(sources=[{"id": "s1", "fault": "stale", "link": {"loss": 0.1}}])
+    with pytest.raises(ValueError, match="loss"):
+        make_config(sources=[{"id": "s1", "link": {"loss": 1.5}}])
 
 
 def test_the_engine_is_the_driver_with_the_scores_collector() -> None:

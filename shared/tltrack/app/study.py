@@ -26,14 +26,15 @@ from tltrack.app.common import (
     "    tltrack study heterogeneous --runs 200\n\n"
     "    tltrack study realizations --realizations 100 --runs 50 --preset paper\n\n"
     "    tltrack study manoeuvres --runs 200\n\n"
-    "    tltrack study clutter --runs 200"
+    "    tltrack study clutter --runs 200\n\n"
+    "    tltrack study links --runs 200"
 )
 def study(
     name: Annotated[
         str,
         typer.Argument(
             help="robust, sources, budget, heterogeneous, presets, intensities, realizations, "
-            "manoeuvres or clutter"
+            "manoeuvres, clutter or links"
         ),
     ],
     runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
@@ -81,6 +82,7 @@ def study(
         "intensities": studies.intensities,
         "manoeuvres": functools.partial(studies.manoeuvres, tracks=tracks),
         "clutter": studies.clutter,
+        "links": studies.links,
     }
     known = [*by_name, "realizations"]
     problems = [
@@ -97,6 +99,7 @@ def study(
         "realizations": realizations,
         "manoeuvres": studies.MANOEUVRE_CONFIGS,
         "clutter": studies.CLUTTER_SWEEPS,
+        "links": len(studies.link_cells(1.0)),
     }
     total = runs * configurations.get(name, 1)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:

@@ -185,6 +185,45 @@ class DetectionSpec(BaseModel):
     )
 
 
+class LinkSpec(BaseModel):
+    """The engine's model of a source's link to the primary (:class:`~tltrack.engine.driver.Lossy`):
+    each transfer is lost, or arrives late by ``delay_s`` plus a uniform jitter, and the primary
+    takes it only if it came within ``deadline_s`` of its own measurement. Live, the real link and
+    the primary tracker's own deadline apply instead, and this is ignored."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    loss: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="probability that a transfer is lost",
+        json_schema_extra=unit("1"),
+    )
+    delay_s: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="from the source's step to the transfer's arrival",
+        json_schema_extra=unit("s"),
+    )
+    jitter_s: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="a uniform extra delay in [0, jitter_s]",
+        json_schema_extra=unit("s"),
+    )
+    deadline_s: float = Field(
+        0.25,
+        ge=0,
+        allow_inf_nan=False,
+        description="the primary's wait for the transfer after its own measurement (live: the "
+        "primary tracker's deadline_ms)",
+        json_schema_extra=unit("s"),
+    )
+
+
 class ModeSpec(BaseModel):
     """One motion mode of the filters (``motion_modes``), in the coordinated turn's state:
     ``cv`` holds the turn rate at 0, ``ct`` turns with turn-rate noise q2."""
@@ -236,6 +275,9 @@ class SourceSpec(BaseModel):
     filter: str | None = Field(None, description="a registered filter kind")
     sensor: SensorSpec | None = Field(None, description="default: the paper's range-bearing")
     detection: DetectionSpec | None = Field(None, description="default: no miss, no clutter")
+    link: LinkSpec | None = Field(
+        None, description="the engine's lossy, late link to the primary; default: perfect"
+    )
 
     @field_validator("filter")
     @classmethod
@@ -246,6 +288,12 @@ class SourceSpec(BaseModel):
     def _one_position(self) -> SourceSpec:
         if self.position is not None and self.sensor is not None and self.sensor.position:
             raise ValueError(f"source {self.id}: give either position or sensor.position, not both")
+        return self
+
+    @model_validator(mode="after")
+    def _one_kind_of_lateness(self) -> SourceSpec:
+        if self.fault == "stale" and self.link is not None:
+            raise ValueError(f"source {self.id}: a stale source's lateness is its fault; no link")
         return self
 
 

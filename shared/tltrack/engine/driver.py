@@ -28,6 +28,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.config import LinkSpec
 from tltrack.engine.registry import FilterSpec, Role, build, parse, recovery, source_name
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
@@ -115,61 +116,57 @@ class Direct:
 
 
 class Lossy:
-    """A link that loses, delays and reorders transfers, per run and seeded.
+    """Each source's link to the primary as a vehicle's radio has it: lossy and late, per run,
+    seeded (the config's ``sources[].link``, :class:`~tltrack.config.LinkSpec`).
 
-    Each run's transfer is lost with probability ``drop``, else arrives ``delay`` steps late
-    plus a uniform jitter of 0..``jitter`` steps, so a later transfer may overtake an earlier
-    one. At step k each run takes the newest transfer (by the step it was made for) that has
-    arrived and that it has not taken before, as if it were current; an older one that arrives
-    after a newer one is discarded. The draws come from the stream (``seed``, run,
-    ``channel/<source id>``). With no loss, delay or jitter it is :class:`Direct`.
+    The transfer for step k_apply leaves its source when made, at (k_apply - 1) Ts. It is lost
+    with probability ``loss``; else it arrives ``delay_s`` plus a uniform jitter in [0,
+    ``jitter_s``] later. The primary takes it at step k_apply if it arrived by k_apply Ts +
+    ``deadline_s`` (its wait after its own measurement); a later one is refused and counted
+    (``late``), never applied to another step: that run's primary steps alone. A source's
+    transfers of one step (one per source filter) share their fate, as one packet would. The
+    draws come from the stream (seed, run, ``link/<source id>``), one pair per step. With a
+    perfect link (no loss, no delay past the deadline) it is :class:`Direct`.
     """
 
     def __init__(
-        self, runs: Sequence[int], seed: int, drop: float = 0.0, delay: int = 0, jitter: int = 0
+        self, runs: Sequence[int], seed: int, links: Mapping[str, LinkSpec], Ts: float
     ) -> None:
-        if not 0.0 <= drop <= 1.0 or delay < 0 or jitter < 0:
-            raise ValueError("drop must be in [0, 1], delay and jitter >= 0")
-        self.runs, self.seed = list(runs), seed
-        self.drop, self.delay, self.jitter = drop, delay, jitter
-        self._rngs: dict[Link, list[np.random.Generator]] = {}
-        #: per link: (k_apply, arrival step per run (-1: lost), the transfer)
-        self._sent: dict[Link, list[tuple[int, NDArray[np.int64], Observation]]] = {}
-        self._taken: dict[Link, NDArray[np.int64]] = {}  #: per run, the newest k_apply taken
-        self._answers: dict[tuple[Link, int], Observation | None] = {}
+        self.runs, self.seed, self.links, self.Ts = list(runs), seed, dict(links), Ts
+        self._rngs = {sid: [stream(seed, r, f"link/{sid}") for r in self.runs] for sid in links}
+        #: per (source id, k_apply) of the last two steps: the runs its transfers reach
+        self.reached: dict[tuple[str, int], NDArray[np.bool_]] = {}
+        self._made: dict[Link, dict[int, Observation]] = {}
+        B = len(self.runs)
+        #: per source id, per run: transfers lost, and transfers refused as late
+        self.lost = {sid: np.zeros(B, dtype=np.int64) for sid in links}
+        self.late = {sid: np.zeros(B, dtype=np.int64) for sid in links}
+
+    def _arrives(self, sid: str, k_apply: int) -> NDArray[np.bool_]:
+        if (sid, k_apply) not in self.reached:
+            spec, rngs = self.links.get(sid), self._rngs.get(sid)
+            if spec is None or rngs is None:  # a source with a perfect link
+                return np.ones(len(self.runs), dtype=bool)
+            lost = np.array([g.random() < spec.loss for g in rngs])
+            delay = spec.delay_s + spec.jitter_s * np.array([g.random() for g in rngs])
+            late = ~lost & (delay > self.Ts + spec.deadline_s)
+            self.lost[sid] += lost
+            self.late[sid] += late
+            self.reached[sid, k_apply] = ~lost & ~late
+            self.reached.pop((sid, k_apply - 2), None)
+        return self.reached[sid, k_apply]
 
     def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
-        rngs = self._rngs.setdefault(
-            link, [stream(self.seed, r, f"channel/{link[1]}") for r in self.runs]
-        )
-        lost = np.array([g.random() < self.drop for g in rngs])
-        late = np.array([self.delay + int(g.integers(0, self.jitter + 1)) for g in rngs])
-        arrival = np.where(lost, -1, k_apply + late)
-        self._sent.setdefault(link, []).append((k_apply, arrival, transfer))
+        ok = self._arrives(link[1], k_apply)
+        made = self._made.setdefault(link, {})
+        made.pop(k_apply - 2, None)
+        if ok.any():
+            made[k_apply] = replace(
+                transfer, mask=ok if transfer.mask is None else ok & transfer.mask
+            )
 
     def receive(self, link: Link, k: int) -> Observation | None:
-        if (link, k) in self._answers:
-            return self._answers[link, k]
-        B = len(self.runs)
-        taken = self._taken.setdefault(link, np.zeros(B, dtype=np.int64))
-        best, best_k = np.full(B, -1), np.zeros(B, dtype=np.int64)
-        sent = self._sent.get(link, [])
-        for i, (k_apply, arrival, _t) in enumerate(sent):
-            newer = (arrival >= 0) & (arrival <= k) & (k_apply > np.maximum(taken, best_k))
-            best, best_k = np.where(newer, i, best), np.where(newer, k_apply, best_k)
-        answer = None
-        if (best >= 0).any():
-            first = sent[int(best[best >= 0][0])][2]
-            mean, cov = first.mean.copy(), np.array(first.cov)
-            for b in np.flatnonzero(best >= 0):
-                k_apply, _arrival, t = sent[best[b]]
-                mean[:, b], cov[b] = t.mean[:, b], t.cov[b]
-                taken[b] = k_apply
-            answer = Observation(first.sensor, mean, cov, best >= 0, first.origin)
-        self._sent[link] = [s for s in sent if ((s[1] >= 0) & (s[0] > taken)).any()]
-        self._answers = {key: v for key, v in self._answers.items() if key[1] >= k}
-        self._answers[link, k] = answer
-        return answer
+        return self._made.get(link, {}).get(k)
 
 
 # ---- the two halves ---------------------------------------------------------------------------

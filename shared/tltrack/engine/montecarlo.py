@@ -24,7 +24,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.driver import Direct, Driver, StepRecord, primary_specs, source_links
+from tltrack.engine.driver import (
+    Channel,
+    Direct,
+    Driver,
+    Lossy,
+    StepRecord,
+    primary_specs,
+    source_links,
+)
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import Run, simulate
@@ -269,9 +277,13 @@ def run_sweep_batch(
     # sensor id -> (K, n_z, B), per configuration (the sources' are the same in all)
     z = [{i: np.stack([s.z[i] for s in sim], axis=2) for i in base.sensor_ids} for sim in sims]
     scores = [Scores(truth, s.layout, timing, keep_tracks, own_n_z(s)) for s in setups]
-    lag = {sid: transfer_lag(base.cfg, sid) for sid in base.source_ids}
     driver = Driver(
-        setups, names, x0_hat, runs, channel=Direct(lag), collectors=[[s] for s in scores]
+        setups,
+        names,
+        x0_hat,
+        runs,
+        channel=channel(base.cfg, runs),
+        collectors=[[s] for s in scores],
     )
     for k in range(1, base.cfg.K + 1):
         driver.step(
@@ -282,6 +294,15 @@ def run_sweep_batch(
             ],
         )
     return [s.close() for s in scores]
+
+
+def channel(cfg: Config, runs: Sequence[int]) -> Channel:
+    """The sources' links to the primary: lossy and late where the config gives a ``link``
+    (:class:`Lossy`), else direct, with a stale source's transfers late (:class:`Direct`)."""
+    links = {s.id: s.link for s in cfg.sources if s.link is not None}
+    if links:
+        return Lossy(runs, cfg.seed, links, cfg.Ts)
+    return Direct({s.id: transfer_lag(cfg, s.id) for s in cfg.sources})
 
 
 def _scans(sims: Sequence[Run], sensor_id: str, k: int) -> list[Array] | None:
