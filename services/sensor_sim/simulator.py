@@ -96,6 +96,11 @@ class Simulator:
         self.setup = setup = Setup(cfg)
         self.layout = setup.layout
         self.sensors = [PRIMARY, *(src.id for src in cfg.sources)] if settings.measurements else []
+        if modelled := [src.id for src in cfg.sources if src.link is not None]:
+            log.warning(
+                "sources %s: a config's link is the engine's model; live, the real link applies",
+                ", ".join(modelled),
+            )
         if settings.replay_csv and not settings.measurements:
             raise replay.ReplayError(
                 "with --measurements false each operator's sensor replays its own rows "
