@@ -29,6 +29,8 @@ ROBUST="$(results robust)"
 LATENCY="$(results latency)"
 DASK="$(results dask)"
 MANOEUVRES="$(results manoeuvres)"
+CLUTTER="$(results clutter)"
+LINKS="$(results links)"
 
 run() {  # run DIR NAME ARGS...: the command, its log and its wall time in DIR/NAME.log
     local dir="$1" name="$2"; shift 2
@@ -87,6 +89,14 @@ done
 run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
 run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
     --json "$MANOEUVRES/modes_step.json"
+
+# ---- papers/clutter: the lost share against the false alarms in the gate (N = 1000: at the
+# study's N = 6000 one process needs about 16 GB)
+run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTTER"
+
+# ---- papers/links: a lossy, late link between vehicles (rpf, N = 6000)
+run "$LINKS" links-200 study links --kind rpf --runs 200 --out "$LINKS/runs-200"
+run "$LINKS" links-1000 study links --kind rpf --runs 1000 --out "$LINKS"
 
 # ---- papers/rpf: the particle filter that keeps the track
 run "$RPF" remedies-eval-s3 --script papers/rpf/rpf_remedies.py --runs 300 --seed 3 \
