@@ -17,14 +17,20 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
-_STYLE = {"pf": "tab:blue", "ukf": "tab:green", "ckf3": "tab:red", "ckf5": "tab:olive"}
+_STYLE = {
+    "pf": "tab:blue",
+    "rpf": "tab:purple",
+    "ukf": "tab:green",
+    "ckf3": "tab:red",
+    "ckf5": "tab:olive",
+}
 
 
 def _style(name: str) -> dict[str, Any]:
     role, _, kind = name.rpartition("-")
     kind = kind.split("/")[0]
-    ls = {"tl": "--", "source": ":", "fusion": "-."}.get(role, "-")
-    marker = "+" if role == "tl" else None
+    ls = {"tl": "--", "robust-tl": (0, (6, 2, 1, 2)), "source": ":", "fusion": "-."}.get(role, "-")
+    marker = {"tl": "+", "robust-tl": "x"}.get(role)
     return {"color": _STYLE.get(kind, "black"), "linestyle": ls, "marker": marker, "markevery": 8}
 
 
