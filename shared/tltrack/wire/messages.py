@@ -121,6 +121,17 @@ def _check_vector(v: list[float], sizes: tuple[int, ...], name: str) -> list[flo
     return v
 
 
+def _check_scan(v: list[list[float]], sizes: tuple[int, ...], name: str) -> list[list[float]]:
+    """At most MAX_DETECTIONS detections, each of one of ``sizes``."""
+    if len(v) > MAX_DETECTIONS:
+        raise PydanticCustomError(
+            "scan_too_large", f"{name} has {len(v)} detections, at most {MAX_DETECTIONS}"
+        )
+    for i, d in enumerate(v):
+        _check_vector(d, sizes, f"{name}[{i}]")
+    return v
+
+
 def _check_covariance(P: list[list[float]], n: int, name: str) -> list[list[float]]:
     """Shape n x n, symmetric to SYMMETRY_RTOL of its largest entry, Cholesky succeeds."""
     if len(P) != n or any(len(row) != n for row in P):
@@ -227,12 +238,7 @@ class Measurement(Message):
     @field_validator("z")
     @classmethod
     def _shape(cls, v: list[list[float]]) -> list[list[float]]:
-        if len(v) > MAX_DETECTIONS:
-            raise PydanticCustomError(
-                "scan_too_large", f"z has {len(v)} detections, at most {MAX_DETECTIONS}"
-            )
-        for i, d in enumerate(v):
-            _check_vector(d, measurement_sizes(), f"z[{i}]")
+        _check_scan(v, measurement_sizes(), "z")
         if len({len(d) for d in v}) > 1:
             raise PydanticCustomError("bad_shape", "z's detections differ in size")
         return v
@@ -266,13 +272,7 @@ class Truth(Message):
     @field_validator("scan")
     @classmethod
     def _scan_shape(cls, v: list[list[float]]) -> list[list[float]]:
-        if len(v) > MAX_DETECTIONS:
-            raise PydanticCustomError(
-                "scan_too_large", f"scan has {len(v)} detections, at most {MAX_DETECTIONS}"
-            )
-        for i, d in enumerate(v):
-            _check_vector(d, (2,), f"scan[{i}]")
-        return v
+        return _check_scan(v, (2,), "scan")
 
     @model_validator(mode="after")
     def _one_flag_per_detection(self) -> Truth:
