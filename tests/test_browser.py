@@ -197,5 +197,12 @@ def test_the_page_draws_the_episode_and_its_clutter_as_it_runs(
             "let n = 0; for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n;"
         )
         assert inked > 5000, f"the trajectory canvas is nearly blank ({inked} px)"
-        errors = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
+        # Chromium aborts a request in flight when the host's interfaces change, as the container
+        # tests' Docker networks come and go beside this test; the page polls again (its own
+        # handling of a failed poll), so only the page's own errors count
+        errors = [
+            e
+            for e in browser.get_log("browser")
+            if e["level"] == "SEVERE" and "net::ERR_NETWORK_CHANGED" not in e["message"]
+        ]
         assert not errors, errors
