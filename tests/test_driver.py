@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +160,21 @@ def test_collectors_see_the_diagnostics_of_every_step() -> None:
     assert all(t is not None and t.origin == "s1" for t in sent)
     assert records["tl-rpf"][0].used is None  # no transfer exists for k = 1
     assert all(r.used.all() for r in records["tl-rpf"][1:])  # type: ignore[union-attr]
+
+
+def test_a_stale_source_beside_a_linked_one_keeps_its_lag() -> None:
+    """The engine's channel: a link for one source leaves another's staleness as it was."""
+    from tltrack.engine.faults import STALE_LAG
+    from tltrack.engine.montecarlo import channel
+
+    cfg = make_config(sources=[{"id": "s1", "fault": "stale"}, {"id": "s2", "link": {"loss": 1.0}}])
+    ch = channel(cfg, RUNS)
+    z = Setup(CFG).sensors["s1"].observe(np.zeros((2, len(RUNS))))
+    made = {}
+    for k_apply in range(2, 8):
+        made[k_apply] = replace(z, mean=z.mean + k_apply)
+        ch.send(("source-pf", "s1"), k_apply, made[k_apply])
+        ch.send(("source-pf", "s2"), k_apply, z)
+        assert ch.receive(("source-pf", "s2"), k_apply) is None  # every one lost
+    got = ch.receive(("source-pf", "s1"), 7)
+    assert got is made[7 - STALE_LAG]

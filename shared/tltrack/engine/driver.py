@@ -126,13 +126,20 @@ class Lossy:
     (``late``), never applied to another step: that run's primary steps alone. A source's
     transfers of one step (one per source filter) share their fate, as one packet would. The
     draws come from the stream (seed, run, ``link/<source id>``), one pair per step. With a
-    perfect link (no loss, no delay past the deadline) it is :class:`Direct`.
+    perfect link (no loss, no delay past the deadline) it is :class:`Direct`. The sources
+    without a link go through ``others`` (a stale source's lag, say).
     """
 
     def __init__(
-        self, runs: Sequence[int], seed: int, links: Mapping[str, LinkSpec], Ts: float
+        self,
+        runs: Sequence[int],
+        seed: int,
+        links: Mapping[str, LinkSpec],
+        Ts: float,
+        others: Channel | None = None,
     ) -> None:
-        self.runs, self.seed, self.links, self.Ts = list(runs), seed, dict(links), Ts
+        self.runs, self.links, self.Ts = list(runs), dict(links), Ts
+        self.others: Channel = others or Direct()
         self._rngs = {sid: [stream(seed, r, f"link/{sid}") for r in self.runs] for sid in links}
         #: per (source id, k_apply) of the last two steps: the runs its transfers reach
         self.reached: dict[tuple[str, int], NDArray[np.bool_]] = {}
@@ -144,9 +151,7 @@ class Lossy:
 
     def _arrives(self, sid: str, k_apply: int) -> NDArray[np.bool_]:
         if (sid, k_apply) not in self.reached:
-            spec, rngs = self.links.get(sid), self._rngs.get(sid)
-            if spec is None or rngs is None:  # a source with a perfect link
-                return np.ones(len(self.runs), dtype=bool)
+            spec, rngs = self.links[sid], self._rngs[sid]
             lost = np.array([g.random() < spec.loss for g in rngs])
             delay = spec.delay_s + spec.jitter_s * np.array([g.random() for g in rngs])
             late = ~lost & (delay > self.Ts + spec.deadline_s)
@@ -157,6 +162,9 @@ class Lossy:
         return self.reached[sid, k_apply]
 
     def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
+        if link[1] not in self.links:
+            self.others.send(link, k_apply, transfer)
+            return
         ok = self._arrives(link[1], k_apply)
         made = self._made.setdefault(link, {})
         made.pop(k_apply - 2, None)
@@ -166,6 +174,8 @@ class Lossy:
             )
 
     def receive(self, link: Link, k: int) -> Observation | None:
+        if link[1] not in self.links:
+            return self.others.receive(link, k)
         return self._made.get(link, {}).get(k)
 
 

@@ -298,11 +298,10 @@ def run_sweep_batch(
 
 def channel(cfg: Config, runs: Sequence[int]) -> Channel:
     """The sources' links to the primary: lossy and late where the config gives a ``link``
-    (:class:`Lossy`), else direct, with a stale source's transfers late (:class:`Direct`)."""
+    (:class:`Lossy`), direct for the others, a stale source's transfers late (:class:`Direct`)."""
+    direct = Direct({s.id: transfer_lag(cfg, s.id) for s in cfg.sources})
     links = {s.id: s.link for s in cfg.sources if s.link is not None}
-    if links:
-        return Lossy(runs, cfg.seed, links, cfg.Ts)
-    return Direct({s.id: transfer_lag(cfg, s.id) for s in cfg.sources})
+    return Lossy(runs, cfg.seed, links, cfg.Ts, direct) if links else direct
 
 
 def _scans(sims: Sequence[Run], sensor_id: str, k: int) -> list[Array] | None:
