@@ -28,11 +28,19 @@ DEADLINE = 0.25  #: in primary periods
 SIGMAS = 3.0  #: a difference is called worse beyond this many standard errors
 
 
+def loss_cell(p: float) -> str:
+    return f"loss {p:.0%}"
+
+
+def delay_cell(d: float) -> str:
+    return f"delay {d:g} T"
+
+
 def cells(Ts: float) -> dict[str, dict[str, float]]:
     """Each cell's link: the loss sweep at no delay, then the delay sweep with jitter."""
-    out = {f"loss {p:.0%}": {"loss": p, "deadline_s": DEADLINE * Ts} for p in LOSSES}
+    out = {loss_cell(p): {"loss": p, "deadline_s": DEADLINE * Ts} for p in LOSSES}
     for d in DELAYS:
-        out[f"delay {d:g} T"] = {
+        out[delay_cell(d)] = {
             "delay_s": d * Ts,
             "jitter_s": JITTER * Ts,
             "deadline_s": DEADLINE * Ts,
@@ -87,9 +95,12 @@ def links(setting: Setting, runner: Runner, out: Path, K: int | None = None) -> 
         row(["---"] * 8),
     ]
     data: dict[str, Any] = {"cells": {}, "links": links_}
+    worse = []
     for name, r in res.items():
         a, b, c = r[iso], r[tl], r[rob]
         d_tl, d_rob = verdict(b, a), verdict(c, a)
+        if d_tl[2] == "worse":
+            worse.append(name)
         lines.append(
             row(
                 [
@@ -105,7 +116,6 @@ def links(setting: Setting, runner: Runner, out: Path, K: int | None = None) -> 
             )
         )
         data["cells"][name] = {**plain(r), "tl_vs_isolated": d_tl, "robust_vs_isolated": d_rob}
-    worse = [n for n, r in res.items() if verdict(r[tl], r[iso])[2] == "worse"]
     lines += [
         "",
         f"TL worse than the isolated filter (beyond {SIGMAS:g} SE) in: "
@@ -116,8 +126,8 @@ def links(setting: Setting, runner: Runner, out: Path, K: int | None = None) -> 
 
 
 def _draw(res: dict[str, Results], names: list[str], out: Path) -> None:
-    loss = [f"loss {p:.0%}" for p in LOSSES]
-    delay = [f"delay {d:g} T" for d in DELAYS]
+    loss = [loss_cell(p) for p in LOSSES]
+    delay = [delay_cell(d) for d in DELAYS]
     for cells_, x, label, file in (
         (loss, [100 * p for p in LOSSES], "transfers lost [%]", "links_loss.png"),
         (delay, DELAYS, "link delay [primary periods], jitter T/2", "links_delay.png"),
