@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -12,7 +11,6 @@ import typer
 from tltrack.app.common import app, build_config, console, filter_names, progress_bar
 
 if TYPE_CHECKING:
-    from tltrack.config import Config
     from tltrack.engine.scan_file import ScanFile
     from tltrack.engine.setup import Setup
 
@@ -59,7 +57,12 @@ def track(
     from tltrack.engine import results
     from tltrack.engine.scan_file import ScanFileError, read_scans
     from tltrack.engine.setup import Setup
-    from tltrack.engine.track import ScansDoNotFitError, check_fit
+    from tltrack.engine.track import (
+        ScansDoNotFitError,
+        check_fit,
+        write_estimates,
+        write_transfers,
+    )
     from tltrack.engine.track import track as run_track
 
     cfg = build_config(
@@ -90,8 +93,8 @@ def track(
         task = bar.add_task("steps", total=cfg.K)
         done = run_track(cfg, names, recorded, truth, lambda: bar.advance(task))
     out.mkdir(parents=True, exist_ok=True)
-    _write_estimates(out / "estimates.csv", cfg, done.tracks.estimates)
-    _write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
+    write_estimates(out / "estimates.csv", cfg.scenario, done.tracks.estimates)
+    write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
     wrote = [
         out / "estimates.csv",
         out / "transfers.csv",
@@ -103,58 +106,6 @@ def track(
             console.print(f"{name}: position RMSE {r.rmse_overall:.2f} m")
     refused = len(recorded.refused)
     console.print(f"{cfg.K} steps, {refused} scan(s) refused; wrote {', '.join(map(str, wrote))}")
-
-
-#: the state's components that lead every estimates.csv, whatever the motion model's order
-LEADING = ("x_m", "y_m", "vx_mps", "vy_mps")
-
-
-def _write_estimates(
-    path: Path, cfg: Config, rows: list[tuple[int, str, np.ndarray, np.ndarray]]
-) -> None:
-    """k, filter, x_m, y_m, vx_mps, vy_mps, the state's other components, and the position
-    covariance P_xx, P_xy, P_yy."""
-    from tltrack.models.kinds import MOTIONS
-
-    components = list(MOTIONS.get(cfg.scenario).components)
-    order = [c for c in LEADING if c in components] + [c for c in components if c not in LEADING]
-    at = [components.index(c) for c in order]
-    ix, iy = components.index("x_m"), components.index("y_m")
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["k", "filter", *order, "P_xx", "P_xy", "P_yy"])
-        for k, name, x, P in rows:
-            cov = (P[ix, ix], P[ix, iy], P[iy, iy])
-            w.writerow([k, name, *(_num(x[i]) for i in at), *(_num(v) for v in cov)])
-
-
-def _write_transfers(
-    path: Path, setup: Setup, rows: list[tuple[int, str, str, np.ndarray, np.ndarray]]
-) -> None:
-    """k_apply, source, filter, eta_<component>... and P_<ci>_<cj> (i <= j) of each transfer,
-    in its source sensor's components (the columns of the sources' kinds; empty where a
-    source's kind has no such component)."""
-    comps: list[str] = []
-    for sid in setup.source_ids:
-        comps += [c for c in setup.sensor(sid).components if c not in comps]
-    pairs = [(a, b) for i, a in enumerate(comps) for b in comps[i:]]
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(
-            [
-                "k_apply",
-                "source",
-                "filter",
-                *(f"eta_{c}" for c in comps),
-                *(f"P_{a}_{b}" for a, b in pairs),
-            ]
-        )
-        for k_apply, name, sid, eta, P in rows:
-            own = list(setup.sensor(sid).components)
-            at = {c: i for i, c in enumerate(own)}
-            means = [_num(eta[at[c]]) if c in at else "" for c in comps]
-            covs = [_num(P[at[a], at[b]]) if a in at and b in at else "" for a, b in pairs]
-            w.writerow([k_apply, sid, name, *means, *covs])
 
 
 def _draw(
@@ -187,7 +138,3 @@ def _draw(
             labels = np.concatenate(known)  # type: ignore[arg-type]
     xy = None if truth is None else layout.position(truth.T).T
     return scans_and_tracks(dets, labels, {n: np.array(v) for n, v in tracks.items()}, path, xy)
-
-
-def _num(v: float) -> str:
-    return repr(float(v))

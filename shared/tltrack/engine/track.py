@@ -12,8 +12,10 @@ writes.
 
 from __future__ import annotations
 
+import csv
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,9 +25,16 @@ from tltrack.engine.driver import Collector, Driver, StepRecord
 from tltrack.engine.montecarlo import FilterResult, Scores, own_n_z
 from tltrack.engine.scan_file import ScanFile
 from tltrack.engine.setup import Setup
+from tltrack.models.kinds import MOTIONS
 from tltrack.models.scan import Statement
 
 Array = NDArray[np.float64]
+
+
+#: one filter's estimate at one step: (k, filter, mean, covariance)
+Estimated = tuple[int, str, Array, Array]
+#: one transfer: (k_apply, the source filter's name, source id, eta_hat, P_eta_eta)
+Sent = tuple[int, str, str, Array, Array]
 
 
 class ScansDoNotFitError(ValueError):
@@ -37,8 +46,8 @@ class Tracks:
     """A collector: each filter's (k, mean, cov), and each source's transfers
     (k_apply, source id, eta_hat, P_eta_eta)."""
 
-    estimates: list[tuple[int, str, Array, Array]] = field(default_factory=list)
-    transfers: list[tuple[int, str, str, Array, Array]] = field(default_factory=list)
+    estimates: list[Estimated] = field(default_factory=list)
+    transfers: list[Sent] = field(default_factory=list)
 
     def __call__(self, record: StepRecord) -> None:
         r = record
@@ -116,3 +125,53 @@ def track(
         stats = scores.close()
         results = {n: FilterResult.from_stats(s, 1, cfg.lost_threshold_m) for n, s in stats.items()}
     return TrackResult(tracks, results, scans.refused)
+
+
+#: the state's components that lead every estimates.csv, whatever the motion model's order
+LEADING = ("x_m", "y_m", "vx_mps", "vy_mps")
+
+
+def write_estimates(path: Path, scenario: str, rows: Sequence[Estimated]) -> None:
+    """estimates.csv: k, filter, x_m, y_m, vx_mps, vy_mps, the state's other components (of the
+    motion model ``scenario``), and the position covariance P_xx, P_xy, P_yy."""
+    components = list(MOTIONS.get(scenario).components)
+    order = [c for c in LEADING if c in components] + [c for c in components if c not in LEADING]
+    at = [components.index(c) for c in order]
+    ix, iy = components.index("x_m"), components.index("y_m")
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["k", "filter", *order, "P_xx", "P_xy", "P_yy"])
+        for k, name, x, P in rows:
+            cov = (P[ix, ix], P[ix, iy], P[iy, iy])
+            w.writerow([k, name, *(_num(x[i]) for i in at), *(_num(v) for v in cov)])
+
+
+def write_transfers(path: Path, setup: Setup, rows: Sequence[Sent]) -> None:
+    """transfers.csv: k_apply, source, filter, eta_<component>... and P_<ci>_<cj> (i <= j)
+    of each transfer, in its source sensor's components (the columns of the sources' kinds;
+    empty where a source's kind has no such component)."""
+    comps: list[str] = []
+    for sid in setup.source_ids:
+        comps += [c for c in setup.sensor(sid).components if c not in comps]
+    pairs = [(a, b) for i, a in enumerate(comps) for b in comps[i:]]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(
+            [
+                "k_apply",
+                "source",
+                "filter",
+                *(f"eta_{c}" for c in comps),
+                *(f"P_{a}_{b}" for a, b in pairs),
+            ]
+        )
+        for k_apply, name, sid, eta, P in rows:
+            own = list(setup.sensor(sid).components)
+            at = {c: i for i, c in enumerate(own)}
+            means = [_num(eta[at[c]]) if c in at else "" for c in comps]
+            covs = [_num(P[at[a], at[b]]) if a in at and b in at else "" for a, b in pairs]
+            w.writerow([k_apply, sid, name, *means, *covs])
+
+
+def _num(v: float) -> str:
+    return repr(float(v))
