@@ -10,7 +10,7 @@ PYTEST  := $(BIN)/pytest
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev,docs]'
+	$(BIN)/pip install --quiet -e '.[dev,docs,stonesoup,cli]'
 	touch $(STAMP)
 
 ## The live dual tracker over loopback Zenoh: a router per operator and the services, one episode, the scorer's summary.
@@ -55,7 +55,6 @@ lint: $(STAMP)
 
 ## Benchmarks (not tests): filter step times and speedups.
 bench: $(STAMP)
-	$(BIN)/pip install --quiet -e '.[dev,bench]'
 	$(BIN)/tltrack bench --json out/bench.json
 	$(BIN)/tltrack bench-live --json out/bench-live.json
 

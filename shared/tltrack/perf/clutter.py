@@ -12,7 +12,7 @@ The steps alternate (clean, cluttered, clean, ...) at every k, so load hits both
 figures are medians over every step of every repeat and their ratio (issue 32 asks for <= 2 at
 N = 6000), with each filter's RMSE over the timed steps.
 
-With Stone Soup installed (``pip install -e .[bench]``), its expected-likelihood particle filter
+With Stone Soup installed (``pip install -e .[stonesoup]``), its expected-likelihood particle filter
 (``SingleTargetExpectedLikelihoodParticleFilter`` with a ``PDAHypothesiser``, its
 ``ConstantTurn`` model and the same N) runs the first ``--stonesoup-steps`` scans of the last
 repeat (it is slow), beside ours on the same scans.
