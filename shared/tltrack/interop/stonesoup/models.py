@@ -1,0 +1,179 @@
+"""tltrack's sensors and motion models as Stone Soup models.
+
+A transfer is a statement in the coordinates of the source's sensor, whose description (kind,
+position, noise parameters: a :class:`~tltrack.config.SensorSpec`) travels with it. To take it, a
+Stone Soup tracker needs that sensor as a Stone Soup measurement model: :class:`Sensor` is any
+tltrack sensor kind, built from such a description. :class:`Motion` is any tltrack motion model as a
+Stone Soup transition model, so a Stone Soup pipeline can run the very models tltrack's engine runs.
+
+Angles. Stone Soup averages an angle circularly (``Bearing.average``). tltrack's sigma-point
+filters take a mean about the centre point instead, ref + sum_s w_s wrap(z_s - ref)
+(:mod:`tltrack.filters.sigma_point`), which stays right with negative weights. A :class:`Sensor`'s
+angles are :class:`Angle`, whose average is that one, so a Stone Soup unscented filter with
+tltrack's sigma points gives tltrack's numbers to rounding.
+"""
+
+from __future__ import annotations
+
+import datetime
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import multivariate_normal
+from stonesoup.base import Property
+from stonesoup.models.base import GaussianModel, TimeVariantModel
+from stonesoup.models.measurement.base import MeasurementModel as StoneSoupMeasurementModel
+from stonesoup.models.measurement.nonlinear import CombinedReversibleGaussianMeasurementModel
+from stonesoup.models.transition.base import TransitionModel
+from stonesoup.types.angle import Bearing
+from stonesoup.types.array import CovarianceMatrix, StateVector, StateVectors
+
+from tltrack.config import SensorSpec
+from tltrack.engine.setup import from_spec
+from tltrack.models.angles import wrap_angle
+from tltrack.models.base import Layout, MeasurementModel, MotionModel
+
+Array = NDArray[np.float64]
+
+
+class Angle(Bearing):
+    """A bearing whose weighted mean is taken about the first of the angles averaged.
+
+    In Stone Soup's unscented transform the first sigma point is the centre, so this is
+    tltrack's mean; over a particle cloud the first particle is as good a reference as any.
+    """
+
+    @classmethod
+    def average(cls, angles: Sequence[Any], weights: Any = None) -> Angle:
+        a = np.asarray(angles, dtype=float)
+        w = np.ones_like(a) if weights is None else np.asarray(weights, dtype=float)
+        ref = a[0]
+        return cls(ref + float(np.sum(w * wrap_angle(a - ref)) / np.sum(w)))
+
+
+def _floats(state: Any) -> Array:
+    """A state's vector(s) as plain floats, (n_x, S)."""
+    return np.asarray(state.state_vector, dtype=float)
+
+
+class Sensor(StoneSoupMeasurementModel, GaussianModel):
+    """A tltrack sensor of any registered kind, as a Stone Soup measurement model.
+
+    ``mapping`` gives the state's (x, y) indices and ``velocity_mapping`` its (vx, vy) (Stone
+    Soup's usual [x, vx, y, vy] by default); ``noise_covar`` defaults to the sensor's own R at
+    noise intensity 1. Its components are in tltrack's order (a range-bearing sensor gives
+    [range, bearing]), its angles :class:`Angle`.
+    """
+
+    spec: SensorSpec = Property(doc="The sensor's description: its kind, position, parameters.")
+    velocity_mapping: Sequence[int] | None = Property(
+        default=None, doc="The state's (vx, vy) indices; default: each position index + 1."
+    )
+    noise_covar: CovarianceMatrix = Property(default=None, doc="Noise covariance (default: R).")
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        vel = self.velocity_mapping or tuple(i + 1 for i in self.mapping)
+        layout = Layout(pos=(int(self.mapping[0]), int(self.mapping[1])), vel=(vel[0], vel[1]))
+        self.model: MeasurementModel = from_spec(self.spec, layout)
+        if self.noise_covar is None:
+            self.noise_covar = self.model.R(1.0)
+        self.noise_covar = CovarianceMatrix(self.noise_covar)
+        self._angular = tuple(bool(a) for a in getattr(self.model, "angular", ()))
+
+    @property
+    def ndim_meas(self) -> int:
+        return self.model.n_z
+
+    def covar(self, **kwargs: Any) -> CovarianceMatrix:
+        return self.noise_covar
+
+    def _typed(self, z: Array) -> StateVectors:
+        """z (n_z, S) with its angle components as :class:`Angle`."""
+        if not any(self._angular):
+            return StateVectors(z)
+        typed = z.astype(object)
+        for i, is_angle in enumerate(self._angular):
+            if is_angle:
+                typed[i, :] = [Angle(v) for v in z[i]]
+        return StateVectors(typed)
+
+    def function(self, state: Any, noise: Any = False, **kwargs: Any) -> StateVectors:
+        z = self.model.h(_floats(state))
+        if noise is True:
+            noise = np.asarray(self.rvs(num_samples=z.shape[1], **kwargs), dtype=float)
+        if noise is not False and noise is not None:
+            z = z + np.asarray(noise, dtype=float).reshape(z.shape)
+        return self._typed(z)
+
+    def jacobian(self, state: Any, **kwargs: Any) -> Array:
+        return self.model.H(_floats(state)[:, 0])
+
+    def logpdf(self, state1: Any, state2: Any, **kwargs: Any) -> Any:
+        """log N(z; h(x), R) with the angles' residual wrapped, on plain floats: a particle cloud's
+        likelihood without Stone Soup's per-element angle objects."""
+        d = self.model.residual(_floats(state1), self.model.h(_floats(state2)))
+        ll = np.atleast_1d(multivariate_normal.logpdf(d.T, cov=self.covar(**kwargs)))
+        return ll[0] if len(ll) == 1 else ll
+
+
+class Stacked(CombinedReversibleGaussianMeasurementModel):
+    """Statements with independent errors about one state, as one measurement [z; eta; ...]:
+    tltrack's TL update, which conditions on the primary's z_k and every transfer at once."""
+
+    def logpdf(self, state1: Any, state2: Any, **kwargs: Any) -> Any:
+        """The sum of the members' log-likelihoods (the noise is block-diagonal)."""
+        z = StateVectors(np.asarray(state1.state_vector))
+        total: Any = 0.0
+        start = 0
+        for model in self.model_list:
+            part = _Vector(StateVector(z[start : start + model.ndim_meas]))
+            total = total + model.logpdf(part, state2, **kwargs)
+            start += model.ndim_meas
+        return total
+
+
+class _Vector:
+    """A bare ``state_vector`` holder: what a model's logpdf reads of a measurement."""
+
+    def __init__(self, state_vector: Any) -> None:
+        self.state_vector = state_vector
+
+
+class Motion(TransitionModel, GaussianModel, TimeVariantModel):
+    """A tltrack motion model as a Stone Soup transition model, over any time interval (its
+    ``with_period``)."""
+
+    model: Any = Property(doc="The tltrack motion model (a tltrack.models.base.MotionModel).")
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._by_dt: dict[float, MotionModel] = {}
+
+    @property
+    def ndim_state(self) -> int:
+        return int(self.model.n)
+
+    def _over(self, time_interval: datetime.timedelta) -> MotionModel:
+        dt = time_interval.total_seconds()
+        if dt not in self._by_dt:
+            self._by_dt[dt] = self.model.with_period(dt)
+        return self._by_dt[dt]
+
+    def function(
+        self, state: Any, noise: Any = False, *, time_interval: datetime.timedelta, **kwargs: Any
+    ) -> StateVectors:
+        x = self._over(time_interval).f(_floats(state))
+        if noise is True:
+            noise = self.rvs(num_samples=x.shape[1], time_interval=time_interval, **kwargs)
+        if noise is not False and noise is not None:
+            x = x + np.asarray(noise, dtype=float).reshape(x.shape)
+        return StateVectors(x)
+
+    def covar(self, *, time_interval: datetime.timedelta, **kwargs: Any) -> CovarianceMatrix:
+        return CovarianceMatrix(self._over(time_interval).Q)
+
+    def jacobian(self, state: Any, *, time_interval: datetime.timedelta, **kwargs: Any) -> Array:
+        return self._over(time_interval).F(_floats(state)[:, 0])

@@ -1,0 +1,113 @@
+"""Transfers over Zenoh for a Stone Soup tracker: a writer for a source, a reader for a primary.
+
+Both run on a session the caller opens under its operator's identity (the routers' access control
+then decides what it may send and read), as tltrack's services do::
+
+    from tltrack.wire.transport import ZenohSettings, open_session
+
+    with open_session(ZenohSettings(username="primary", password=...)) as session:
+        for when, detections in TransferReader(session, ndim_state=4, mapping=(0, 2)):
+            ...
+
+The reader validates each payload as tltrack's primary tracker does (the message, then its
+sender against the key's source) and skips, counts and logs what it refuses.
+"""
+
+from __future__ import annotations
+
+import datetime
+import logging
+import time
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import zenoh
+from stonesoup.base import Property
+from stonesoup.buffered_generator import BufferedGenerator
+from stonesoup.reader.base import DetectionReader
+
+from tltrack.interop.stonesoup.models import Sensor
+from tltrack.interop.stonesoup.transfer import TransferDetection, detection, transfer_message
+from tltrack.wire import keys
+from tltrack.wire.messages import RejectCounter, Transfer
+from tltrack.wire.transport import Publisher, Subscriber, decode_received
+
+log = logging.getLogger(__name__)
+
+
+class TransferWriter:
+    """Publishes a Stone Soup source's transfers on ``tltrack/source/<source>/transfer/<episode>``,
+    as tltrack's source tracker does."""
+
+    def __init__(self, session: zenoh.Session, *, source: str, episode: str) -> None:
+        self.source = source
+        self.episode = episode
+        self._pub = Publisher(session, keys.transfer(source, episode))
+
+    def write(self, prediction: Any, sensor: Sensor, *, k: int, t_sensor: float) -> Transfer:
+        """Send the transfer of ``prediction`` (the source's density for step k + 1) after its
+        step ``k``; returns the message sent."""
+        msg = transfer_message(
+            prediction, sensor, episode=self.episode, source=self.source, k=k, t_sensor=t_sensor
+        )
+        self._pub.put(msg)
+        return msg
+
+    def close(self) -> None:
+        self._pub.close()
+
+    def __enter__(self) -> TransferWriter:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+class TransferReader(DetectionReader):
+    """A Stone Soup detection feeder of the transfers a session receives: each as a
+    :class:`~tltrack.interop.stonesoup.transfer.TransferDetection` at its source's time.
+
+    It stops after ``count`` transfers, or when none has come for ``idle_s`` seconds.
+    """
+
+    session: zenoh.Session = Property(doc="An open Zenoh session, under the primary's identity.")
+    ndim_state: int = Property(doc="The dimension of the tracker's state.")
+    mapping: Sequence[int] = Property(doc="The state's (x, y) indices.")
+    velocity_mapping: Sequence[int] | None = Property(
+        default=None, doc="The state's (vx, vy) indices; default: each position index + 1."
+    )
+    key: str = Property(default=keys.TRANSFERS, doc="The key expression to subscribe to.")
+    count: int | None = Property(default=None, doc="Stop after this many transfers.")
+    idle_s: float | None = Property(default=None, doc="Stop after this long without one.")
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.rejects = RejectCounter()  #: what it refused, per key and reason
+
+    @BufferedGenerator.generator_method
+    def detections_gen(self) -> Iterator[tuple[datetime.datetime, set[TransferDetection]]]:
+        taken = 0
+        with Subscriber(self.session, [self.key]) as sub:
+            last = time.monotonic()
+            while self.count is None or taken < self.count:
+                item = sub.recv(timeout=0.1)
+                if item is None:
+                    if self.idle_s is not None and time.monotonic() - last > self.idle_s:
+                        return
+                    continue
+                last = time.monotonic()
+                msg = decode_received(item, Transfer, self.rejects)
+                if msg is None:
+                    continue
+                if msg.sender != keys.source_of(item.key):  # none may speak for another
+                    self.rejects.add(item.key, "wrong_sender")
+                    log.warning("refused a transfer on %s sent by %s", item.key, msg.sender)
+                    continue
+                det = detection(
+                    msg,
+                    ndim_state=self.ndim_state,
+                    mapping=self.mapping,
+                    velocity_mapping=self.velocity_mapping,
+                )
+                taken += 1
+                yield det.timestamp, {det}
