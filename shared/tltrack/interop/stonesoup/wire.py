@@ -30,7 +30,7 @@ from tltrack.interop.stonesoup.models import Sensor
 from tltrack.interop.stonesoup.transfer import TransferDetection, detection, transfer_message
 from tltrack.wire import keys
 from tltrack.wire.messages import RejectCounter, Transfer
-from tltrack.wire.transport import Publisher, Subscriber, decode_received
+from tltrack.wire.transport import Publisher, Received, Subscriber, decode_received
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +67,9 @@ class TransferReader(DetectionReader):
     """A Stone Soup detection feeder of the transfers a session receives: each as a
     :class:`~tltrack.interop.stonesoup.transfer.TransferDetection` at its source's time.
 
-    It stops after ``count`` transfers, or when none has come for ``idle_s`` seconds.
+    It subscribes when made (what arrives before it is read waits in a bounded queue), and stops
+    after ``count`` transfers, or when none has come for ``idle_s`` seconds. Close it, or use it
+    in a ``with`` block.
     """
 
     session: zenoh.Session = Property(doc="An open Zenoh session, under the primary's identity.")
@@ -83,31 +85,51 @@ class TransferReader(DetectionReader):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.rejects = RejectCounter()  #: what it refused, per key and reason
+        self._sub = Subscriber(self.session, [self.key])
+
+    def close(self) -> None:
+        self._sub.close()
+
+    def __enter__(self) -> TransferReader:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+    def _accepted(self, item: Received) -> Transfer | None:
+        """The transfer in ``item``, or None if tltrack's primary would refuse it."""
+        msg = decode_received(item, Transfer, self.rejects)
+        if msg is None:
+            return None
+        try:
+            info = keys.parse(item.key)
+        except ValueError:
+            info = None
+        if info is None or info.kind != "transfer" or msg.sender != info.source:
+            self.rejects.add(item.key, "wrong_sender")  # none may speak for another
+            log.warning("refused a transfer on %s sent by %s", item.key, msg.sender)
+            return None
+        return msg
 
     @BufferedGenerator.generator_method
     def detections_gen(self) -> Iterator[tuple[datetime.datetime, set[TransferDetection]]]:
         taken = 0
-        with Subscriber(self.session, [self.key]) as sub:
+        last = time.monotonic()
+        while self.count is None or taken < self.count:
+            item = self._sub.recv(timeout=0.1)
+            if item is None:
+                if self.idle_s is not None and time.monotonic() - last > self.idle_s:
+                    return
+                continue
             last = time.monotonic()
-            while self.count is None or taken < self.count:
-                item = sub.recv(timeout=0.1)
-                if item is None:
-                    if self.idle_s is not None and time.monotonic() - last > self.idle_s:
-                        return
-                    continue
-                last = time.monotonic()
-                msg = decode_received(item, Transfer, self.rejects)
-                if msg is None:
-                    continue
-                if msg.sender != keys.source_of(item.key):  # none may speak for another
-                    self.rejects.add(item.key, "wrong_sender")
-                    log.warning("refused a transfer on %s sent by %s", item.key, msg.sender)
-                    continue
-                det = detection(
-                    msg,
-                    ndim_state=self.ndim_state,
-                    mapping=self.mapping,
-                    velocity_mapping=self.velocity_mapping,
-                )
-                taken += 1
-                yield det.timestamp, {det}
+            msg = self._accepted(item)
+            if msg is None:
+                continue
+            det = detection(
+                msg,
+                ndim_state=self.ndim_state,
+                mapping=self.mapping,
+                velocity_mapping=self.velocity_mapping,
+            )
+            taken += 1
+            yield det.timestamp, {det}

@@ -1,0 +1,89 @@
+"""A Stone Soup tracker as the primary of a running tltrack deployment: it reads its own
+measurements and a live source's transfers over Zenoh, under the primary's identity with the ACL
+on, and its TL-UKF gives the engine's TL-UKF of the same episode."""
+
+from __future__ import annotations
+
+import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+from livestack import logs, sim_flags, stack
+from security_helpers import session, start_router, start_service
+from stonesoup.predictor.kalman import UnscentedKalmanPredictor
+from stonesoup.types.array import CovarianceMatrix, StateVector
+from stonesoup.types.detection import Detection
+from stonesoup.types.hypothesis import SingleHypothesis
+from stonesoup.types.state import GaussianState
+from stonesoup.updater.kalman import UnscentedKalmanUpdater
+from tltrack.engine.montecarlo import trace_run
+from tltrack.engine.scenario import initial_estimate
+from tltrack.engine.setup import PRIMARY, Setup, sensor_spec
+from tltrack.interop.stonesoup import UKF_POINTS, Motion, Sensor, TransferReader, stacked, timestamp
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, Measurement
+from tltrack.wire.transport import Subscriber
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
+
+K = 30
+CT = {"ndim_state": 5, "mapping": (0, 2), "velocity_mapping": (1, 3)}  # the episode's layout
+
+
+def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> None:
+    with stack(tmp_path) as s:
+        start_router(s)  # the shipped ACL; every process under its operator's identity
+        # a late measurement waits (no predict-through): the source stays the engine's
+        src = {"TLTRACK_SOURCE_FILTER": "ukf", "TLTRACK_SOURCE_GAP_TIMEOUT_S": "30"}
+        start_service(s, "source_tracker", env=src)
+        with (
+            session(s.endpoint, "primary") as z,
+            Subscriber(z, [keys.EPISODES]) as episodes,
+            Subscriber(z, [keys.PRIMARY_MEAS]) as meas,
+            TransferReader(session=z, count=K - 1, idle_s=60.0, **CT) as reader,
+        ):
+            only_the_source = {"TLTRACK_SIM_WAIT_FOR": '["source/s1:source_tracker"]'}
+            start_service(s, "sensor_sim", *sim_flags(K, 100, pace=20), env=only_the_source)
+            got = episodes.recv_message(EpisodeStart, timeout=90)
+            assert got is not None, logs(s)
+            start = got[1]
+            cfg = start.parsed_config()
+            setup = Setup(cfg)
+            assert (setup.motion.layout.pos, setup.motion.layout.vel) == (
+                CT["mapping"],
+                CT["velocity_mapping"],
+            )
+            own = Sensor(spec=sensor_spec(cfg, PRIMARY), noise_covar=setup.sensors[PRIMARY].R, **CT)
+            predictor = UnscentedKalmanPredictor(Motion(model=setup.motion), **UKF_POINTS)
+            updater = UnscentedKalmanUpdater(None, **UKF_POINTS)
+            T, t0 = datetime.timedelta(seconds=setup.motion.T), timestamp(0.0)
+            x0 = initial_estimate(cfg, start.run)
+            state = GaussianState(
+                StateVector(x0), CovarianceMatrix(np.diag(cfg.P0_diag)), timestamp=t0
+            )
+            zs: dict[int, np.ndarray] = {}
+
+            def z_at(k: int) -> Detection:
+                while k not in zs:
+                    m = meas.recv_message(Measurement, timeout=30)
+                    assert m is not None, logs(s)
+                    zs[m[1].k] = np.asarray(m[1].z[0])
+                return Detection(StateVector(zs[k]), timestamp=t0 + k * T, measurement_model=own)
+
+            def step(k: int, d: Detection) -> np.ndarray:
+                nonlocal state
+                state = updater.update(
+                    SingleHypothesis(predictor.predict(state, timestamp=t0 + k * T), d)
+                )
+                return np.asarray(state.state_vector, dtype=float)[:, 0]
+
+            track = [step(1, z_at(1))]  # step 1 has no transfer: the first is sent after it
+            for _, (eta,) in reader:
+                assert eta.k_apply == len(track) + 1 and eta.source == "s1"
+                k = eta.k_apply
+                track.append(step(k, stacked([z_at(k), eta], when=t0 + k * T)))
+        assert len(track) == K, logs(s)
+        assert reader.rejects.total == 0
+    engine = trace_run(cfg, ["tl-ukf"], start.run)["tl-ukf"]
+    np.testing.assert_allclose(np.array(track), engine, rtol=1e-6, atol=1e-6)
