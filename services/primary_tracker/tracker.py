@@ -24,7 +24,7 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.tracking import PrimaryEpisode, StepQueue, StepReport, TrackedEpisodes
-from tltrack.wire import keys
+from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Transfer
 from tltrack.wire.transport import Received, ZenohSettings, decode_received
 
@@ -100,7 +100,9 @@ class PrimaryTracker:
                 self.episodes.offer(info.episode, item.key, z, self.svc.rejects)
         elif info.kind == "transfer" and info.episode is not None and info.source is not None:
             t = decode_received(item, Transfer, self.svc.rejects)
-            if t is not None:
+            if t is not None and (refused := admission.refusal(info, t)):
+                self.svc.rejects.add(item.key, refused[0])  # none may speak for another source
+            elif t is not None:
                 self._on_transfer(info.episode, info.source, item.key, t)
 
     def _on_liveliness(self, sid: str, up: bool) -> None:
@@ -122,9 +124,7 @@ class PrimaryTracker:
         return Episode(start, tracker, [s.id for s in cfg.sources])
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
-        if t.sender != sid:  # any source may help, but none may speak for another
-            self.svc.rejects.add(key, "wrong_sender")
-            return
+        """Keep a transfer of source ``sid`` (its sender, :meth:`handle` checked) for its step."""
         ep = self.episodes.get(e)
         if ep is None:
             self.episodes.hold(e, key, lambda: self._on_transfer(e, sid, key, t), self.svc.rejects)

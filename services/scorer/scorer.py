@@ -28,13 +28,12 @@ from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.summary import print_summary
 from tltrack.services.scorer.store import Store
 from tltrack.services.scorer.summary import Summarizer
-from tltrack.wire import keys
+from tltrack.wire import admission, keys
 from tltrack.wire.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
 from tltrack.wire.transport import Queryable, Received, ZenohSettings, decode_received
 
 log = logging.getLogger("scorer")
 NAME = "scorer"
-SENSOR_SIM = "sensor_sim"  #: the sender of the truth
 
 
 class Settings(BaseSettings):
@@ -100,16 +99,15 @@ class Scorer:
             truth = decode_received(item, Truth, self.svc.rejects)
             if (
                 truth is not None
-                and self._admissible(item, truth, SENSOR_SIM)
+                and self._admissible(item, info, truth)
                 and self._stored(item.key, self.store.truth(truth))
             ):
                 self.summarizer.forget(truth.episode)  # if scored, this row is late: read again
         elif info.kind in ("source_estimate", "primary_estimate"):
             est = decode_received(item, EstimateMsg, self.svc.rejects)
-            owner = info.source if info.kind == "source_estimate" else keys.PRIMARY
             if (
                 est is not None
-                and self._admissible(item, est, owner or "")
+                and self._admissible(item, info, est)
                 and self._stored(item.key, self.store.estimate(est, item.t_recv))
             ):
                 self.counts[est.episode][est.filter] += 1
@@ -118,16 +116,15 @@ class Scorer:
         elif info.kind == "stats" and info.operator and info.service:
             self._on_stats(item, info.operator, info.service)
 
-    def _admissible(self, item: Received, msg: Truth | EstimateMsg, sender: str) -> bool:
-        """Only the key's owner, about its key's episode, for a step 1..K; else counted, dropped.
+    def _admissible(self, item: Received, info: keys.KeyInfo, msg: Truth | EstimateMsg) -> bool:
+        """Only the key's owner, about its key's episode (:mod:`tltrack.wire.admission`), for a
+        step 1..K; else counted, dropped.
 
         A sample of an episode not yet started is held, and handled again once it starts.
         """
         K = self.K.get(msg.episode)
-        if msg.sender != sender:
-            reason = "wrong_sender"
-        elif msg.episode != keys.episode_of(item.key):
-            reason = "unknown_episode"
+        if refused := admission.refusal(info, msg):
+            reason = refused[0]
         elif K is None:
             self.held.hold(msg.episode, item.key, lambda: self.handle(item), self.svc.rejects)
             return False
