@@ -74,3 +74,61 @@ def generate(
         if p in out_of_date:
             p.write_text(text)
             console.print(f"wrote {p}")
+
+
+@access_app.command(
+    "zenoh-cli-config",
+    epilog="Example:\n\n    tltrack access zenoh-cli-config --as primary --out primary.json5\n\n"
+    "    zenoh --config primary.json5 subscribe -k 'tltrack/source/*/transfer/*' "
+    "--decoder tltrack",
+)
+def zenoh_cli_config(
+    operator: Annotated[
+        str,
+        typer.Option(
+            "--as", help="the operator to log in as: referee, primary, source/<id> (the manifest's)"
+        ),
+    ],
+    out: Annotated[
+        Path | None, typer.Option(help="the file to write [zenoh-cli-<operator>.json5]")
+    ] = None,
+    endpoint: Annotated[
+        str | None, typer.Option(help="the router to connect to [tcp/127.0.0.1:7447]")
+    ] = None,
+    identity: Annotated[
+        str | None,
+        typer.Option(help="which of the operator's identities (the referee has three) [its first]"),
+    ] = None,
+    manifest: ManifestOption = None,
+) -> None:
+    """Write a zenoh-cli `--config` file that connects to the router under an operator's
+    identity, with its demo password (so the file is readable by its owner only).
+
+    It is rendered from the services' own Zenoh settings (multicast scouting off, the same lease),
+    so zenoh-cli sees the network as a service of that operator does: what the router's access
+    control lets that identity read, and nothing else. TLS settings come from the environment
+    (TLTRACK_ZENOH_TLS_ROOT_CA...), as for the services.
+    """
+    from tltrack.live import access
+    from tltrack.live.manifest import ManifestError
+    from tltrack.wire.transport import DEFAULT_ENDPOINT
+
+    m = manifest_or_exit(manifest)
+    try:
+        settings = access.client_settings(m, operator, endpoint or DEFAULT_ENDPOINT, identity)
+        text = access.zenoh_cli_config(settings, operator)
+    except ManifestError as err:
+        console.print(f"[red]error:[/red] --as: {err}")
+        raise typer.Exit(2) from None
+    except ValueError as err:  # a setting zenoh or the settings' checks refuse
+        console.print(f"[red]error:[/red] {err}")
+        raise typer.Exit(2) from None
+    path = out or Path(f"zenoh-cli-{m.operator(operator).router}.json5")
+    try:
+        access.write_private(path, text)
+    except OSError as err:
+        console.print(f"[red]error:[/red] cannot write {path}: {err.strerror}")
+        raise typer.Exit(2) from None
+    console.print(
+        f"wrote {path} (mode 600): zenoh --config {path} subscribe -k KEY --decoder tltrack"
+    )

@@ -1,5 +1,6 @@
 """Access control from the operator manifest: each router's rules and password dictionary, and
-the files the repository commits for the package's manifest.
+the files the repository commits for the package's manifest, and a Zenoh tool's config file
+under an operator's identity.
 
 The rules are written once, as templates in ``shared/tltrack/access/templates/`` (commented: they
 are the product's privacy promise). A template repeats what each source operator needs:
@@ -16,12 +17,15 @@ access files, compose.yaml), which ``tltrack access generate`` writes and a test
 
 from __future__ import annotations
 
+import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from tltrack.live.manifest import Manifest
+from pydantic import SecretStr
+from tltrack.live.manifest import Manifest, ManifestError
 from tltrack.wire import keys
+from tltrack.wire.transport import DEFAULT_ENDPOINT, ZenohSettings
 
 ACCESS_DIR = Path(__file__).resolve().parents[1] / "access"
 TEMPLATES = ACCESS_DIR / "templates"
@@ -125,6 +129,46 @@ def identity_env(identity: str) -> dict[str, str]:
         "TLTRACK_ZENOH_USERNAME": identity,
         "TLTRACK_ZENOH_PASSWORD": Manifest.password(identity),
     }
+
+
+def client_settings(
+    manifest: Manifest,
+    operator: str,
+    endpoint: str = DEFAULT_ENDPOINT,
+    identity: str | None = None,
+) -> ZenohSettings:
+    """A client of ``endpoint`` logged in as one of ``operator``'s identities (its first, or
+    ``identity``) with its demo password: what a service of it would use; the rest (TLS) from
+    the environment, as for the services. :class:`ManifestError` names what the manifest lacks."""
+    op = manifest.operator(operator)
+    user = identity or op.identities[0]
+    if user not in op.identities:
+        has = ", ".join(op.identities)
+        raise ManifestError(f"{user!r} is not an identity of operator {operator!r}; it has {has}")
+    password = SecretStr(Manifest.password(user))
+    return ZenohSettings(mode="client", endpoints=[endpoint], username=user, password=password)
+
+
+def zenoh_cli_config(settings: ZenohSettings, operator: str) -> str:
+    """A zenoh-cli ``--config`` file (JSON5) of ``settings``, which log in as ``operator``."""
+    return (
+        f"// A Zenoh client logged in as {settings.username!r} (operator {operator}) with its\n"
+        "// password: keep this file private. Written by `tltrack access zenoh-cli-config`:\n"
+        "//   zenoh --config THIS_FILE subscribe -k 'tltrack/source/*/transfer/*' "
+        "--decoder tltrack\n"
+        "// zenoh-cli replaces `mode` with its own --mode (default peer): either logs in alike.\n"
+        "// The router's access control decides what it may read (docs/isolation.md).\n"
+        + settings.to_json5()
+    )
+
+
+def write_private(path: Path, text: str) -> None:
+    """Write ``text`` to ``path``, readable by its owner only (mode 600) from its first byte."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)  # an existing file keeps its mode through O_CREAT
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
 
 
 # ---- the repository's files ---------------------------------------------------------------------

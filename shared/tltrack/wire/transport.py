@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import re
 import threading
 import time
 from collections import deque
@@ -114,12 +115,14 @@ class ZenohSettings(BaseSettings):
             raise ValueError("a client needs at least one endpoint to connect to")
         return self
 
-    def to_config(self) -> zenoh.Config:
-        """The zenoh configuration (keys of zenoh's DEFAULT_CONFIG.json5)."""
-        cfg = zenoh.Config()
+    def entries(self) -> list[tuple[str, str]]:
+        """The zenoh configuration as ``(path, JSON5 value)`` pairs (keys of zenoh's
+        DEFAULT_CONFIG.json5): :meth:`to_config` and :meth:`to_json5` both write these, so a
+        session opened here and a config file for another Zenoh tool say the same."""
+        out: list[tuple[str, str]] = []
 
         def put(key: str, value: Any) -> None:
-            cfg.insert_json5(key, json.dumps(value))
+            out.append((key, json.dumps(value)))
 
         put("mode", self.mode)
         put("scouting/multicast/enabled", False)
@@ -153,8 +156,32 @@ class ZenohSettings(BaseSettings):
         if any(e.startswith("tls/") for e in self.endpoints) or self.tls_root_ca is not None:
             put(f"{tls}/verify_name_on_connect", self.tls_verify_name)
         if self.access_control_file is not None:
-            cfg.insert_json5("access_control", self.access_control_file.read_text())
+            out.append(("access_control", self.access_control_file.read_text()))
+        return out
+
+    def to_config(self) -> zenoh.Config:
+        """The zenoh configuration of :meth:`entries`."""
+        cfg = zenoh.Config()
+        for key, value in self.entries():
+            cfg.insert_json5(key, value)
         return cfg
+
+    def to_json5(self) -> str:
+        """:meth:`entries` as the text of a zenoh config file (``zenoh.Config.from_file``), each
+        value as zenoh itself parsed it; ``ValueError`` for one it refuses (a bad endpoint)."""
+        try:
+            cfg = self.to_config()
+        except zenoh.ZError as err:  # its message, without the Rust source locations
+            said = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', str(err))
+            raise ValueError(f"zenoh refuses it: {said.group(1) if said else err}") from None
+        tree: dict[str, Any] = {}
+        for key, _ in self.entries():
+            *parents, leaf = key.split("/")
+            node = tree
+            for part in parents:
+                node = node.setdefault(part, {})
+            node[leaf] = json.loads(cfg.get_json(key))
+        return json.dumps(tree, indent=2) + "\n"
 
 
 def open_session(settings: ZenohSettings | None = None) -> zenoh.Session:
