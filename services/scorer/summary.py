@@ -3,7 +3,8 @@
 RMSE follows the paper: RMSE(k) = sqrt(mean over episodes of the squared position error at k),
 overall = mean over k. Latency is end to end: sensor timestamp to the estimate's arrival here
 (meaningful on one host; across hosts it needs synchronised clocks). ``stages_ms`` splits it into
-the p50 of each stage of :mod:`tltrack.live.latency`.
+the p50 of each stage of :mod:`tltrack.live.latency`. Each step's error and latency are those of
+:mod:`tltrack.live.scores`, which ``tltrack scores --jsonl`` writes one by one.
 
 Each episode is scored on its own, from its rows alone (read through the tables' primary keys), and
 a :class:`Summarizer` keeps the scores of the episodes the scorer has finished with: a summary then
@@ -23,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tltrack.filters import consistency
 from tltrack.live import latency
+from tltrack.live.scores import squared_error
 from tltrack.services.scorer.store import Store
 
 
@@ -62,7 +64,7 @@ class _Scores:
 def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
     """Every filter's scores in ``episode``, from its rows alone."""
     truth = {
-        k: np.array(json.loads(pos))
+        k: json.loads(pos)
         for k, pos in store.rows(
             "SELECT k, pos FROM truth WHERE episode = ? AND pos IS NOT NULL", episode
         )
@@ -86,9 +88,8 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
                 lo, hi = json.loads(edges)
                 band.append(1 if window > hi else -1 if window < lo else 0)
             if step in truth and pos is not None:
-                d = np.array(json.loads(pos)) - truth[step]
                 k.append(step)
-                sq.append(float(d[0] ** 2 + d[1] ** 2))
+                sq.append(squared_error(json.loads(pos), truth[step]))
             if t_received is not None and t_step is not None:
                 split.append(latency.stages(t_sensor, t_received, t_step, step_ms, t_sent, t_recv))
         scores[name] = _Scores(
@@ -97,7 +98,7 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
             steps=len(mine),
             used=sum(r[2] for r in mine),
             recoveries=sum(r[3] or 0 for r in mine),
-            end_to_end=np.array([(r[5] - r[4]) * 1e3 for r in mine]),
+            end_to_end=np.array([latency.end_to_end_ms(r[4], r[5]) for r in mine]),
             split=np.array(split).reshape(-1, len(latency.STAGES)),
             nis=np.array(nis),
             band=np.array(band, dtype=np.int64),

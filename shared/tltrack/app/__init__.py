@@ -3,7 +3,18 @@
 Option names are a contract: other tools call them.
 """
 
-from tltrack.app import access, bench, demo, experiment, fit, reproduce, router, study, track
+from tltrack.app import (
+    access,
+    bench,
+    demo,
+    experiment,
+    fit,
+    reproduce,
+    router,
+    scores,
+    study,
+    track,
+)
 from tltrack.app.common import app
 
 __all__ = [
@@ -15,6 +26,7 @@ __all__ = [
     "fit",
     "reproduce",
     "router",
+    "scores",
     "study",
     "track",
 ]

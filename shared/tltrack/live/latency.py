@@ -30,6 +30,12 @@ from tltrack.wire.messages import EstimateMsg
 STAGES = ("to_tracker", "wait", "step", "publish", "to_receiver")
 
 
+def end_to_end_ms(t_sensor: float, t_recv: float) -> float:
+    """An estimate's latency as the scorer reports it: from the sensor's publication of z_k to
+    the estimate's arrival at the scorer (the sum of the :data:`STAGES`), in ms."""
+    return (t_recv - t_sensor) * 1e3
+
+
 def stages(
     t_sensor: float, t_received: float, t_step: float, step_ms: float, t_sent: float, t_recv: float
 ) -> tuple[float, float, float, float, float]:

@@ -1,0 +1,94 @@
+"""Each filter's score at each step, from the scorer's SQLite file: its position error against
+the truth, its latency, and whether it used a transfer.
+
+The scorer's summary aggregates these (``tltrack.services.scorer.summary``: the RMSE over
+episodes, the latency's percentiles); ``tltrack scores --jsonl`` writes them one by one, for a
+notebook. Both compute them with :func:`squared_error` and
+:func:`tltrack.live.latency.end_to_end_ms`, so a line of the file and the summary agree to the
+last bit: ``error_m`` at k is the root of what the RMSE averages at k.
+
+:func:`open_file` opens the file read-only, so that reading it beside a running scorer changes
+nothing in it (SQLite's WAL lets a reader in while the scorer writes).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sqlite3
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from tltrack.live import latency
+
+#: the columns read here, of the tables of ``tltrack.services.scorer.store``
+COLUMNS = {
+    "episodes": ("episode", "started"),
+    "truth": ("episode", "k", "pos"),
+    "estimates": ("episode", "filter", "k", "pos", "transfer_used", "t_sensor", "t_recv"),
+}
+
+
+class NotAScorerFileError(ValueError):
+    """The file is missing, not SQLite, or not the scorer's; the message says which."""
+
+
+def squared_error(pos: Sequence[float], truth: Sequence[float]) -> float:
+    """The squared distance between an estimated and a true position (m²), as the RMSE takes it."""
+    dx, dy = pos[0] - truth[0], pos[1] - truth[1]
+    return dx**2 + dy**2  # ** as NumPy's scalars square: the summary's RMSE, bit for bit
+
+
+@dataclass(frozen=True)
+class StepScore:
+    """One filter at one step of one episode."""
+
+    episode: str
+    filter: str
+    k: int
+    error_m: float | None  #: None: no truth at k (a replay without one)
+    latency_ms: float
+    transfer_used: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def open_file(path: Path) -> sqlite3.Connection:
+    """The scorer's file at ``path``, read-only; :class:`NotAScorerFileError` otherwise."""
+    if not path.is_file():
+        raise NotAScorerFileError(f"{path}: no such file")
+    try:
+        db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True)
+        found = {t: {row[1] for row in db.execute(f"PRAGMA table_info({t})")} for t in COLUMNS}
+    except sqlite3.DatabaseError as err:
+        raise NotAScorerFileError(f"{path}: not an SQLite database ({err})") from None
+    missing = [f"{t}.{c}" for t, cols in COLUMNS.items() for c in cols if c not in found[t]]
+    if missing:
+        db.close()
+        raise NotAScorerFileError(
+            f"{path}: not a scorer's database (no {', '.join(missing)}); the scorer writes one "
+            "where TLTRACK_SCORER_DB says, `tltrack demo` in out/demo/scorer.sqlite"
+        )
+    return db
+
+
+def step_scores(db: sqlite3.Connection, episode: str | None = None) -> Iterator[StepScore]:
+    """Every estimate's score, by episode (in the order they started), filter and step; only
+    ``episode``'s if given."""
+    rows = db.execute(
+        "SELECT e.episode, e.filter, e.k, e.pos, t.pos, e.t_sensor, e.t_recv, e.transfer_used"
+        " FROM estimates e"
+        " LEFT JOIN truth t ON t.episode = e.episode AND t.k = e.k"
+        " LEFT JOIN episodes s ON s.episode = e.episode"
+        " WHERE ?1 IS NULL OR e.episode = ?1"
+        " ORDER BY s.started, e.episode, e.filter, e.k",
+        (episode,),
+    )
+    for ep, name, k, pos, truth, t_sensor, t_recv, used in rows:
+        error = None
+        if pos is not None and truth is not None:
+            error = math.sqrt(squared_error(json.loads(pos), json.loads(truth)))
+        yield StepScore(ep, name, k, error, latency.end_to_end_ms(t_sensor, t_recv), bool(used))
