@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from doubles import RADAR
 from livestack import logs, sim_flags, stack
 from security_helpers import session, start_router, start_service
 from stonesoup.predictor.kalman import UnscentedKalmanPredictor
@@ -21,8 +22,9 @@ from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import initial_estimate
 from tltrack.engine.setup import PRIMARY, Setup, sensor_spec
 from tltrack.interop.stonesoup import UKF_POINTS, Motion, Sensor, TransferReader, stacked, timestamp
+from tltrack.live import supervisor
 from tltrack.wire import keys
-from tltrack.wire.messages import EpisodeStart, Measurement
+from tltrack.wire.messages import EpisodeStart, Measurement, Transfer, encode
 from tltrack.wire.transport import Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
@@ -87,3 +89,26 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
         assert reader.rejects.total == 0
     engine = trace_run(cfg, ["tl-ukf"], start.run)["tl-ukf"]
     np.testing.assert_allclose(np.array(track), engine, rtol=1e-6, atol=1e-6)
+
+
+def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
+    """A transfer on s1's key sent as s2, and a payload that is no transfer, are counted and
+    skipped; the good one after them is read."""
+    good = Transfer(
+        episode="e", sender="s1", k=3, t_sensor=3.0, k_apply=4, sensor=RADAR,
+        eta=[1000.0, 0.5], P_eta=[[25.0, 0.0], [0.0, 1e-4]],
+    )  # fmt: skip
+    with stack(tmp_path) as s:
+        s.start_router()
+        with (
+            supervisor.client(s.endpoint) as z,
+            TransferReader(session=z, count=1, idle_s=20.0, **CT) as reader,
+        ):
+            key = keys.transfer("s1", "e")
+            z.put(key, encode(good.model_copy(update={"sender": "s2"})))
+            z.put(key, b"\x93not a transfer")
+            z.put(key, encode(good))
+            (got,) = [d for _, dets in reader for d in dets]
+    assert (got.source, got.k_apply) == ("s1", 4)
+    assert reader.rejects.count(key, "wrong_sender") == 1
+    assert reader.rejects.count(key) == 2

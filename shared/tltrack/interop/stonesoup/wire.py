@@ -9,8 +9,9 @@ then decides what it may send and read), as tltrack's services do::
         for when, detections in TransferReader(session, ndim_state=4, mapping=(0, 2)):
             ...
 
-The reader validates each payload as tltrack's primary tracker does (the message, then its
-sender against the key's source) and skips, counts and logs what it refuses.
+The reader validates each payload as tltrack's primary tracker does (the message, then
+:func:`tltrack.wire.admission.refusal`: its sender must be the key's source), and skips, counts
+and logs what it refuses.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from stonesoup.reader.base import DetectionReader
 
 from tltrack.interop.stonesoup.models import Sensor
 from tltrack.interop.stonesoup.transfer import TransferDetection, detection, transfer_message
-from tltrack.wire import keys
+from tltrack.wire import admission, keys
 from tltrack.wire.messages import RejectCounter, Transfer
 from tltrack.wire.transport import Publisher, Received, Subscriber, decode_received
 
@@ -105,9 +106,13 @@ class TransferReader(DetectionReader):
             info = keys.parse(item.key)
         except ValueError:
             info = None
-        if info is None or info.kind != "transfer" or msg.sender != info.source:
-            self.rejects.add(item.key, "wrong_sender")  # none may speak for another
-            log.warning("refused a transfer on %s sent by %s", item.key, msg.sender)
+        if info is None or info.kind != "transfer":
+            refused: tuple[str, str] | None = ("wrong_key", f"{item.key} is not a transfer key")
+        else:
+            refused = admission.refusal(info, msg)
+        if refused is not None:
+            self.rejects.add(item.key, refused[0])
+            log.warning("refused a transfer on %s: %s", item.key, refused[1])
             return None
         return msg
 
