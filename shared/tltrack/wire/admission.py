@@ -11,7 +11,7 @@ routers let through:
   owner's, and either when it is about another episode than its key's.
 
 The primary's tracker and the scorer make these checks with :func:`refusal`, and so does the
-zenoh-cli decoder (:mod:`tltrack.interop.zenoh_cli`), which therefore prints the reason they give.
+zenoh-cli decoder (``tltrack.interop.zenoh_cli``), which therefore prints the reason they give.
 """
 
 from __future__ import annotations
