@@ -31,6 +31,7 @@ DASK="$(results dask)"
 MANOEUVRES="$(results manoeuvres)"
 CLUTTER="$(results clutter)"
 LINKS="$(results links)"
+STONESOUP="$(results stonesoup)"
 
 run() {  # run DIR NAME ARGS...: the command, its log and its wall time in DIR/NAME.log
     local dir="$1" name="$2"; shift 2
@@ -97,6 +98,10 @@ run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTT
 # ---- papers/links: a lossy, late link between vehicles (rpf, N = 6000)
 run "$LINKS" links-200 study links --kind rpf --runs 200 --out "$LINKS/runs-200"
 run "$LINKS" links-1000 study links --kind rpf --runs 1000 --out "$LINKS"
+
+# ---- papers/stonesoup: a Stone Soup particle filter with the plugin against the engine (N = 1000)
+run "$STONESOUP" stonesoup-particles-500 --script papers/stonesoup/particles.py 500 \
+    "$STONESOUP/particles-500.json"
 
 # ---- papers/rpf: the particle filter that keeps the track
 run "$RPF" remedies-eval-s3 --script papers/rpf/rpf_remedies.py --runs 300 --seed 3 \

@@ -781,7 +781,8 @@ OUTSIDE = re.compile(
     r"rich|typer|click|fastapi|starlette|uvicorn|msgpack|scipy|matplotlib|numba|"
     r"prometheus_client|builtins|typing|typing_extensions|collections|concurrent|pathlib|enum|"
     r"dataclasses|contextlib|threading|subprocess|signal|socket|sqlite3|logging|types|io|"
-    r"argparse|asyncio|abc|queue|re|datetime|os|sys|json|csv|tomllib|multiprocessing)(\..*)?$"
+    r"argparse|asyncio|abc|queue|re|datetime|os|sys|json|csv|tomllib|multiprocessing|stonesoup)"
+    r"(\..*)?$"
 )
 
 

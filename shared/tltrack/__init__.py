@@ -17,7 +17,9 @@ Layers, bottom to top; each folder is one, and an import never runs back up:
 7. :mod:`tltrack.live`: a live service's base, its episodes, process supervision and signals;
 8. :mod:`tltrack.perf`: the step and live benchmarks;
 9. :mod:`tltrack.app`: the ``tltrack`` command; ``services/`` (``tltrack.services``), the
-   processes.
+   processes;
+10. :mod:`tltrack.interop`: where tracking people work, beside them: the Stone Soup plugin and the
+    zenoh-cli decoder (optional extras).
 """
 
 __version__ = "0.1.0"
