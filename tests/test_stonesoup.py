@@ -208,3 +208,14 @@ def test_a_stone_soup_particle_filter_takes_a_transfer() -> None:
     alone = updater.update(SingleHypothesis(prediction, z))
     helped = updater.update(SingleHypothesis(prediction, stacked([z, eta], when=t)))
     assert np.trace(helped.covar[:4:2, :4:2]) < np.trace(alone.covar[:4:2, :4:2])
+
+
+def test_a_sensor_takes_its_description_as_a_config_gives_it_and_names_a_bad_one() -> None:
+    radar = {"kind": "range-bearing", "position": [10.0, 0.0], "sigma_r": 5.0}
+    with pytest.raises(ValueError, match=r"a range-bearing sensor needs sigma_bearing \[rad\]"):
+        Sensor(spec=radar, ndim_state=4, mapping=(0, 2))
+    full = Sensor(spec={**radar, "sigma_bearing": 0.01}, ndim_state=4, mapping=(0, 2))
+    assert full.spec.params == {"sigma_r": 5.0, "sigma_bearing": 0.01}
+    np.testing.assert_allclose(full.covar(), np.diag([25.0, 1e-4]))
+    with pytest.raises(ValueError, match="sigma_x is not a parameter of a range-bearing sensor"):
+        Sensor(spec={**radar, "sigma_x": 1.0}, ndim_state=4, mapping=(0, 2))

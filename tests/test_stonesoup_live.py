@@ -21,7 +21,15 @@ from stonesoup.updater.kalman import UnscentedKalmanUpdater
 from tltrack.engine.montecarlo import trace_run
 from tltrack.engine.scenario import initial_estimate
 from tltrack.engine.setup import PRIMARY, Setup, sensor_spec
-from tltrack.interop.stonesoup import UKF_POINTS, Motion, Sensor, TransferReader, stacked, timestamp
+from tltrack.interop.stonesoup import (
+    UKF_POINTS,
+    Motion,
+    Sensor,
+    TransferReader,
+    TransferWriter,
+    stacked,
+    timestamp,
+)
 from tltrack.live import supervisor
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Transfer, encode
@@ -112,3 +120,26 @@ def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
     assert (got.source, got.k_apply) == ("s1", 4)
     assert reader.rejects.count(key, "wrong_sender") == 1
     assert reader.rejects.count(key) == 2
+
+
+def test_a_stone_soup_source_writes_under_its_identity(tmp_path: Path) -> None:
+    """TransferWriter on source s1's session reaches the primary's reader through the ACL; the
+    same writer on source s2's session, speaking for s1, is stopped by the router."""
+    sensor = Sensor(spec=RADAR, **CT)
+    ahead = GaussianState(StateVector([1000.0, 5.0, 800.0, -2.0, 0.0]), np.eye(5) * 25.0)
+    with stack(tmp_path) as s:
+        start_router(s)
+        with (
+            session(s.endpoint, "primary") as z,
+            session(s.endpoint, "source-s1") as s1,
+            session(s.endpoint, "source-s2") as s2,
+            TransferReader(session=z, count=2, idle_s=3.0, **CT) as reader,
+        ):
+            with TransferWriter(s2, source="s1", episode="e") as forger:
+                forger.write(ahead, sensor, k=1, t_sensor=1.0)
+            with TransferWriter(s1, source="s1", episode="e") as writer:
+                sent = writer.write(ahead, sensor, k=2, t_sensor=2.0)
+            got = [d for _, dets in reader for d in dets]  # stops 3 s after the last
+    assert [(d.source, d.k_apply) for d in got] == [("s1", 3)]
+    np.testing.assert_array_equal(np.asarray(got[0].state_vector, dtype=float)[:, 0], sent.eta)
+    assert reader.rejects.total == 0

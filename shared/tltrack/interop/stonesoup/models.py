@@ -58,6 +58,21 @@ def _floats(state: Any) -> Array:
     return np.asarray(state.state_vector, dtype=float)
 
 
+def _full(spec: Any) -> SensorSpec:
+    """``spec`` (or the mapping of one) with every parameter its kind declares: the defaults
+    filled in, and a ValueError naming those with none (a transfer carries a full description)."""
+    spec = spec if isinstance(spec, SensorSpec) else SensorSpec.model_validate(spec)
+    given = spec.params
+    missing = [
+        f"{p.name} [{p.unit}]" for p in spec.declared if p.name not in given and p.default is None
+    ]
+    if missing:
+        raise ValueError(f"a {spec.kind} sensor needs {', '.join(missing)}")
+    defaults = {p.name: p.default for p in spec.declared if p.name not in given}
+    position = spec.position or (0.0, 0.0)
+    return SensorSpec.model_validate({"kind": spec.kind, "position": position, **defaults, **given})
+
+
 class Sensor(StoneSoupMeasurementModel, GaussianModel):
     """A tltrack sensor of any registered kind, as a Stone Soup measurement model.
 
@@ -67,7 +82,9 @@ class Sensor(StoneSoupMeasurementModel, GaussianModel):
     [range, bearing]), its angles :class:`Angle`.
     """
 
-    spec: SensorSpec = Property(doc="The sensor's description: its kind, position, parameters.")
+    spec: SensorSpec = Property(
+        doc="The sensor's description: its kind, position and parameters (or that mapping)."
+    )
     velocity_mapping: Sequence[int] | None = Property(
         default=None, doc="The state's (vx, vy) indices; default: each position index + 1."
     )
@@ -75,6 +92,7 @@ class Sensor(StoneSoupMeasurementModel, GaussianModel):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        self.spec = _full(self.spec)
         vel = self.velocity_mapping or tuple(i + 1 for i in self.mapping)
         layout = Layout(pos=(int(self.mapping[0]), int(self.mapping[1])), vel=(vel[0], vel[1]))
         self.model: MeasurementModel = from_spec(self.spec, layout)
