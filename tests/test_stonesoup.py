@@ -219,3 +219,35 @@ def test_a_sensor_takes_its_description_as_a_config_gives_it_and_names_a_bad_one
     np.testing.assert_allclose(full.covar(), np.diag([25.0, 1e-4]))
     with pytest.raises(ValueError, match="sigma_x is not a parameter of a range-bearing sensor"):
         Sensor(spec={**radar, "sigma_x": 1.0}, ndim_state=4, mapping=(0, 2))
+
+
+def test_stone_soups_extended_updater_and_associator_take_a_transfer() -> None:
+    """The extended Kalman updater linearises the stacked model with tltrack's Jacobians, and a
+    distance hypothesiser with a nearest-neighbour associator picks the transfer out of a set of
+    detections, as it would any detection."""
+    from stonesoup.dataassociator.neighbour import NearestNeighbour
+    from stonesoup.hypothesiser.distance import DistanceHypothesiser
+    from stonesoup.measures import Mahalanobis
+    from stonesoup.predictor.kalman import ExtendedKalmanPredictor
+    from stonesoup.types.track import Track
+    from stonesoup.updater.kalman import ExtendedKalmanUpdater
+
+    t0, t1 = timestamp(0.0), timestamp(1.0)
+    prior = GaussianState(StateVector(CFG.x0), CovarianceMatrix(np.diag(CFG.P0_diag)), timestamp=t0)
+    predictor = ExtendedKalmanPredictor(Motion(model=SETUP.motion))
+    prediction = predictor.predict(prior, timestamp=t1)
+    sent = transfer_message(prediction, sensor("s1"), episode="e", source="s1", k=0, t_sensor=0)
+    eta = detection(sent, ndim_state=5, mapping=LAYOUT.pos, when=t1)
+    far = Detection(StateVector([eta.state_vector[0, 0] + 5000.0, 0.1]), t1, sensor("s1"))
+
+    updater = ExtendedKalmanUpdater(None)
+    x = np.asarray(prediction.state_vector, dtype=float)[:, 0]
+    z = Detection(StateVector(SETUP.sensor(PRIMARY).h(x)), t1, sensor(PRIMARY))
+    alone = updater.update(SingleHypothesis(prediction, z))
+    helped = updater.update(SingleHypothesis(prediction, stacked([z, eta])))
+    assert np.trace(helped.covar[:4:2, :4:2]) < np.trace(alone.covar[:4:2, :4:2])
+
+    track = Track([prior])
+    hypothesiser = DistanceHypothesiser(predictor, updater, Mahalanobis(), missed_distance=30)
+    chosen = NearestNeighbour(hypothesiser).associate({track}, {far, eta}, t1)[track]
+    assert chosen.measurement is eta
