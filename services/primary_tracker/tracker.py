@@ -2,8 +2,10 @@
 
 Step k needs z_k and, from every source of the episode, the transfer with ``k_apply == k``. The
 primary waits for missing transfers at most ``deadline_ms`` after z_k is ready, and not at all for
-a source whose liveliness token is gone; then it takes the step with what it has (an isolated step
-if nothing). ``lockstep`` waits without a deadline, for tests and exact replays.
+a source whose liveliness token is gone, nor for one whose heartbeat has been silent for two of its
+periods (``heartbeat_s``): its direct link is cut (:mod:`tltrack.live.heartbeat`), though its token
+still arrives through the referee's router. Then it takes the step with what it has (an isolated
+step if nothing). ``lockstep`` waits without a deadline, for tests and exact replays.
 
 The isolated twin is there only for comparison. It steps ``twin_delay_ms`` after the TL estimate
 is out, when that estimate's hops to its receivers no longer compete with it for the CPU.
@@ -22,6 +24,7 @@ from tltrack.config import Config, FilterKindName
 from tltrack.filters.decision import NotComparableError
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
+from tltrack.live.heartbeat import LinkWatch
 from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.tracking import PrimaryEpisode, StepQueue, StepReport, TrackedEpisodes
 from tltrack.wire import admission, keys
@@ -44,6 +47,9 @@ class Settings(BaseSettings):
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
+    heartbeat_s: float = Field(
+        0.1, gt=0, le=10, description="the sources' heartbeat period: two missed mean a cut link"
+    )
     gap_timeout_s: float = Field(
         1.0, gt=0, description="step without a measurement missing this long"
     )
@@ -82,6 +88,7 @@ class PrimaryTracker:
         self.episodes: TrackedEpisodes[Episode] = TrackedEpisodes(settings.max_episodes, self._open)
         self.alive: set[str] = set()  # source ids whose tracker token is up
         self.seen: set[str] = set()  # ... or ever was
+        self.links = LinkWatch(settings.heartbeat_s)  # whose direct link is up, by heartbeat
 
     # ---- inputs ---------------------------------------------------------------------------
 
@@ -92,6 +99,11 @@ class PrimaryTracker:
         if info.kind == "alive" and info.source is not None:
             if info.service == SOURCE_TRACKER:
                 self._on_liveliness(info.source, item.is_put)
+        elif info.kind == "heartbeat" and info.source is not None:
+            if item.is_put and not item.payload:
+                self._on_heartbeat(info.source, item.t_recv)
+            else:
+                self.svc.rejects.add(item.key, "invalid")  # a heartbeat carries nothing
         elif info.kind == "episode":
             self.episodes.handle(item, self.svc.rejects, self.s.recovery)
         elif info.kind == "primary_meas" and info.episode is not None:
@@ -112,6 +124,30 @@ class PrimaryTracker:
             self.seen.add(sid)
         else:
             self.alive.discard(sid)
+
+    def _on_heartbeat(self, sid: str, t_recv: float) -> None:
+        """A heartbeat of ``sid``, dated when it arrived (not when this loop got to it)."""
+        arrived = time.monotonic() - max(0.0, time.time() - t_recv)
+        if self.links.beat(sid, arrived):
+            log.info("link to source %s back: waiting for its transfers again", sid)
+            self._links_changed()
+        elif sid not in self.svc.status.get("links", {}):
+            self._links_changed()
+
+    def check_links(self) -> None:
+        """Mark the links whose heartbeat went silent as cut (call it once the inbox is read)."""
+        for sid in self.links.check(time.monotonic()):
+            log.warning(
+                "link to source %s cut (no heartbeat for %.0f ms): stepping without its transfers",
+                sid,
+                self.links.timeout_s * 1e3,
+            )
+            self.svc.count("link_cuts")
+            self._links_changed()
+
+    def _links_changed(self) -> None:
+        self.svc.status["links"] = self.links.states()
+        self.svc.publish_stats(force=True)  # the dashboard shows a change at once
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         try:
@@ -146,6 +182,7 @@ class PrimaryTracker:
     def advance(self) -> float | None:
         """Take every step that can be taken; the seconds until the next deadline, if any."""
         self.episodes.expire(self.svc.rejects)
+        self.check_links()  # a step waiting for a source whose link is cut waits no longer
         wait: float | None = None
         for e, ep in self.episodes.items():
             if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
@@ -181,8 +218,9 @@ class PrimaryTracker:
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:
-        """A source whose token went away is not waited for; an unseen one is (it may be late)."""
-        return sid in self.alive or sid not in self.seen
+        """A source whose token went away is not waited for, nor one whose link is cut; an unseen
+        one is (it may be late)."""
+        return (sid in self.alive or sid not in self.seen) and not self.links.is_cut(sid)
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
         """The TL estimate goes out first; the isolated twin's later (:meth:`_step_twins`)."""
@@ -256,7 +294,7 @@ def main(argv: list[str] | None = None) -> None:
     if FILTERS.get(settings.filter).particle:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.PRIMARY, settings.zenoh) as svc:
-        inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS)
+        inbox = svc.subscribe(keys.EPISODES, keys.PRIMARY_MEAS, keys.TRANSFERS, keys.HEARTBEATS)
         liveliness = svc.subscribe(
             keys.alive(keys.source_operator(keys.ANY), SOURCE_TRACKER), liveliness=True
         )
@@ -268,8 +306,12 @@ def main(argv: list[str] | None = None) -> None:
         while not svc.stop.is_set():
             for item in liveliness.drain():
                 tracker.handle(item)
-            # while a step waits for a transfer or the twin for its turn, poll liveliness at 50 Hz
-            for item in svc.drain(inbox, timeout=0.2 if wait is None else min(wait, 0.02)):
+            # while a step waits for a transfer or the twin for its turn, poll liveliness at 50 Hz;
+            # and wake up when a link's heartbeat is due
+            timeout = 0.2 if wait is None else min(wait, 0.02)
+            if (due := tracker.links.due(time.monotonic())) is not None:
+                timeout = min(timeout, due + 1e-3)
+            for item in svc.drain(inbox, timeout=timeout):
                 tracker.handle(item)
             for item in liveliness.drain():
                 tracker.handle(item)

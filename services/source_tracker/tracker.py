@@ -1,4 +1,8 @@
-"""Algorithm 1 as a service: step on each measurement in order, publish estimate and transfer."""
+"""Algorithm 1 as a service: step on each measurement in order, publish estimate and transfer.
+
+Beside them, a heartbeat every ``heartbeat_s`` that reaches the primary over the direct link
+only (:mod:`tltrack.live.heartbeat`): its silence tells the primary that link is cut.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack.config import Config, FilterKindName
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
+from tltrack.live.heartbeat import HeartbeatSender
 from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.tracking import (
     SourceEpisode,
@@ -38,6 +43,9 @@ class Settings(BaseSettings):
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
     gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
+    heartbeat_s: float = Field(
+        0.1, gt=0, le=10, description="heartbeat period on the direct link to the primary"
+    )
     log_level: str = "INFO"
     zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
@@ -135,8 +143,10 @@ def main(argv: list[str] | None = None) -> None:
         for item in svc.running_episodes():
             tracker.handle(item)
         svc.announce()
-        while not svc.stop.is_set():
-            for item in svc.drain(inbox, timeout=0.1):
-                tracker.handle(item)
-            tracker.advance()
-            svc.publish_stats()
+        beat = keys.heartbeat(settings.source_id)
+        with HeartbeatSender(svc.session, beat, settings.heartbeat_s):
+            while not svc.stop.is_set():
+                for item in svc.drain(inbox, timeout=0.1):
+                    tracker.handle(item)
+                tracker.advance()
+                svc.publish_stats()

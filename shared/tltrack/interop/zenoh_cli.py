@@ -71,6 +71,10 @@ def describe(key: str, value: bytes) -> dict[str, Any]:
         return {"key": key, "refused": "bad_key", "detail": str(err)}
     if info.kind in ("stats", "scorer_summary"):
         return _json(key, info.kind, value)
+    if info.kind == "heartbeat":  # an empty put, as the primary takes it (tltrack.live.heartbeat)
+        if value:
+            return {"key": key, "refused": "invalid", "detail": "a heartbeat carries nothing"}
+        return {"key": key, "kind": "heartbeat"}
     expected = EXPECTED.get(info.kind)
     if expected is None:  # a liveliness token's key: `zenoh liveliness sub` watches those
         return {"key": key, "kind": info.kind, "detail": "a liveliness key carries no message"}

@@ -77,6 +77,8 @@ class Service:
         self.stop = threading.Event()
         self.rejects = RejectCounter()
         self.counters: dict[str, int] = {}
+        #: what a service adds to its statistics beside the counters (the primary: its links)
+        self.status: dict[str, Any] = {}
         self._zenoh = zenoh_settings
         self._subs: list[Subscriber] = []
         self._pubs: dict[str, Publisher] = {}
@@ -156,6 +158,7 @@ class Service:
             "counters": dict(self.counters),
             "rejected": self.rejects.snapshot(),
             "dropped": sum(s.dropped for s in self._subs),
+            **self.status,
         }
 
     def publish_stats(self, every: float = 1.0, force: bool = False) -> None:

@@ -12,6 +12,7 @@ Layout (``e`` is an episode id, ``sid`` a source id, both ``[A-Za-z0-9_-]{1,64}`
     tltrack/primary/meas/{e}                     Measurement                 (primary's sensor)
     tltrack/source/{sid}/meas/{e}                Measurement                 (source's sensor)
     tltrack/source/{sid}/transfer/{e}            Transfer                    (source -> primary)
+    tltrack/source/{sid}/heartbeat               empty put, every period     (source -> primary)
     tltrack/source/{sid}/estimate/{e}            EstimateMsg                 (source -> scorer)
     tltrack/primary/estimate/{tl|isolated}/{e}   EstimateMsg                 (primary -> scorer)
     tltrack/alive/{operator}/{service}           liveliness tokens
@@ -108,6 +109,12 @@ def transfer(sid: str, e: str) -> str:
     return f"{ROOT}/source/{_seg(sid, 'source id')}/transfer/{_seg(e, 'episode id')}"
 
 
+def heartbeat(sid: str) -> str:
+    """Source ``sid``'s heartbeat: an empty put every period, which the routers let through on
+    the direct source-primary link only, so that its silence means that link is down."""
+    return f"{ROOT}/source/{_seg(sid, 'source id')}/heartbeat"
+
+
 def source_estimate(sid: str, e: str) -> str:
     """Source ``sid``'s state estimates."""
     return f"{ROOT}/source/{_seg(sid, 'source id')}/estimate/{_seg(e, 'episode id')}"
@@ -143,6 +150,7 @@ CLOCKS = clock(ANY)  #: tltrack/clock/*
 PRIMARY_MEAS = primary_meas(ANY)  #: tltrack/primary/meas/*
 SOURCE_MEAS = source_meas(ANY, ANY)  #: tltrack/source/*/meas/*
 TRANSFERS = transfer(ANY, ANY)  #: tltrack/source/*/transfer/*
+HEARTBEATS = heartbeat(ANY)  #: tltrack/source/*/heartbeat
 SOURCE_ESTIMATES = source_estimate(ANY, ANY)  #: tltrack/source/*/estimate/*
 PRIMARY_ESTIMATES = primary_estimate(ANY, ANY)  #: tltrack/primary/estimate/*/*
 ALIVE = f"{ROOT}/alive/**"  #: every liveliness token
@@ -157,6 +165,7 @@ KeyKind = Literal[
     "primary_meas",
     "source_meas",
     "transfer",
+    "heartbeat",
     "source_estimate",
     "primary_estimate",
     "alive",
@@ -201,6 +210,8 @@ def parse(key: str) -> KeyInfo:
             return KeyInfo("stats", operator=PRIMARY, service=p[3])
     if p[1] == REFEREE and n == 4 and p[2] == "stats":
         return KeyInfo("stats", operator=REFEREE, service=p[3])
+    if p[1] == "source" and n == 4 and p[3] == "heartbeat":
+        return KeyInfo("heartbeat", source=p[2], operator=f"source/{p[2]}")
     if p[1] == "source" and n >= 5:
         sid, op = p[2], f"source/{p[2]}"
         if n == 5 and p[3] == "meas":
