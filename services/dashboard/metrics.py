@@ -130,6 +130,11 @@ class ServiceCollector(Collector):
             "1 while the service's liveliness token is alive",
             labels=["service"],
         )
+        links = GaugeMetricFamily(
+            "tltrack_source_link_up",
+            "1 while a source's heartbeat reaches the service over the direct link, 0 once cut",
+            labels=["service", "source"],
+        )
         for h in self.state.services():
             up.add_metric([h.name], 1.0 if h.alive else 0.0)
             s = h.stats
@@ -142,7 +147,9 @@ class ServiceCollector(Collector):
             for event, n in s["counters"].items():
                 events.add_metric([h.name, event], n)
             dropped.add_metric([h.name], s["dropped"])
-        yield from (rejected, reasons, events, dropped, up)
+            for sid, state in s.get("links", {}).items():
+                links.add_metric([h.name, sid], 1.0 if state == "up" else 0.0)
+        yield from (rejected, reasons, events, dropped, up, links)
 
     def describe(self) -> Iterator[Metric]:
         return iter(())  # names vary with the services seen; nothing to check at registration

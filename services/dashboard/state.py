@@ -149,6 +149,19 @@ def _count_map(value: Any) -> dict[str, int]:
     return out
 
 
+def _link_map(value: Any) -> dict[str, str]:
+    """The primary's link to each source, ``up`` or ``cut`` (tltrack.live.heartbeat), from
+    untrusted JSON: anything else is left out."""
+    out: dict[str, str] = {}
+    if isinstance(value, dict):
+        for sid, state in value.items():
+            if len(out) >= MAX_STATS_ENTRIES:
+                break
+            if isinstance(sid, str) and state in ("up", "cut"):
+                out[sid[:64]] = state
+    return out
+
+
 def clean_stats(raw: Any) -> dict[str, Any] | None:
     """The parts of a service's statistics the dashboard uses, or None if it is not an object."""
     if not isinstance(raw, dict):
@@ -162,6 +175,7 @@ def clean_stats(raw: Any) -> dict[str, Any] | None:
         "rejected_by_key": _count_map(rejected.get("by_key")),
         "rejected_by_reason": _count_map(rejected.get("by_reason")),
         "dropped": dropped if type(dropped) is int and dropped >= 0 else 0,
+        "links": _link_map(raw.get("links")),
     }
 
 
@@ -418,6 +432,7 @@ class State:
             "rejected_total": sum(s.get("rejected_by_reason", {}).values()),
             "rejected_by_reason": s.get("rejected_by_reason", {}),
             "dropped": s.get("dropped", 0),
+            "links": s.get("links", {}),
         }
 
 

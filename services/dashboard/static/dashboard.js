@@ -416,8 +416,13 @@ function fillHealth(services) {
     li.dataset.alive = String(s.alive);
     li.dataset.service = s.name;
     const steps = s.counters.steps !== undefined ? ` · ${s.counters.steps} steps` : "";
-    li.append(el("span", null, "dot"), el("span", s.name, "name"),
-      el("span", `${s.alive ? "alive" : "gone"} · ${age(s.stats_age_s)}${steps}`, "meta"));
+    li.append(el("span", null, "dot"), el("span", s.name, "name"));
+    for (const [sid, state] of Object.entries(s.links || {})) {  // the primary's direct links
+      const link = el("span", `link ${sid}: ${state}`, "link");
+      link.dataset.state = state;
+      li.append(link);
+    }
+    li.append(el("span", `${s.alive ? "alive" : "gone"} · ${age(s.stats_age_s)}${steps}`, "meta"));
     ul.append(li);
   }
 }
