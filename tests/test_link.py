@@ -1,0 +1,152 @@
+"""The link emulator (tltrack.live.link) on loopback sockets, and the primary's view of a link from
+heartbeats (tltrack.live.heartbeat), given the time."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import socket
+import time
+from collections.abc import Iterator
+
+import pytest
+from tltrack.live.heartbeat import LinkWatch
+from tltrack.live.link import LinkEmulator, Shape, apply_control, read_control
+from tltrack.wire import keys
+
+pytestmark = pytest.mark.unit
+
+
+@contextlib.contextmanager
+def target() -> Iterator[tuple[socket.socket, str]]:
+    """A listening socket: the router at the far end of the link."""
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        server.settimeout(5)
+        yield server, f"tcp/127.0.0.1:{server.getsockname()[1]}"
+
+
+def dial(link: LinkEmulator) -> socket.socket:
+    host, port = link.endpoint.removeprefix("tcp/").rsplit(":", 1)
+    sock = socket.create_connection((host, int(port)), timeout=5)
+    return sock
+
+
+def receive(sock: socket.socket, n: int) -> bytes:
+    out = b""
+    while len(out) < n:
+        chunk = sock.recv(n - len(out))
+        if not chunk:
+            break
+        out += chunk
+    return out
+
+
+def test_each_chunk_waits_the_delay_in_order_and_the_other_way_too():
+    with target() as (server, to), LinkEmulator(to, shape=Shape(0.15, 0.05), seed=1) as link:
+        client = dial(link)
+        far, _ = server.accept()
+        t0 = time.monotonic()
+        for i in range(5):
+            client.sendall(bytes([i]) * 10)
+            time.sleep(0.01)
+        got = receive(far, 50)
+        forward = time.monotonic() - t0
+        assert got == b"".join(bytes([i]) * 10 for i in range(5)), "order kept"
+        assert 0.1 <= forward < 0.5, forward
+        link.shape("back", delay_s=0.0, jitter_s=0.0)
+        t0 = time.monotonic()
+        far.sendall(b"back")
+        assert receive(client, 4) == b"back"
+        assert time.monotonic() - t0 < 0.1
+        client.close()
+        far.close()
+
+
+def test_a_cut_closes_the_link_and_refuses_it_until_restored():
+    with target() as (server, to), LinkEmulator(to) as link:
+        client = dial(link)
+        far, _ = server.accept()
+        client.sendall(b"up")
+        assert receive(far, 2) == b"up"
+        link.cut()
+        assert receive(client, 1) == b"", "the dialler sees the link close"
+        again = dial(link)  # accepted by the relay's socket, then closed at once
+        assert receive(again, 1) == b""
+        link.restore()
+        client = dial(link)
+        far2, _ = server.accept()
+        client.sendall(b"back")
+        assert receive(far2, 4) == b"back"
+        for s in (client, far, far2, again):
+            s.close()
+
+
+def test_a_stall_holds_the_bytes_and_the_rate_spaces_them():
+    with target() as (server, to), LinkEmulator(to) as link:
+        client = dial(link)
+        far, _ = server.accept()
+        far.settimeout(0.3)
+        link.stall()
+        client.sendall(b"held")
+        with pytest.raises(TimeoutError):
+            far.recv(4)
+        link.resume()
+        far.settimeout(5)
+        assert receive(far, 4) == b"held"
+        link.shape(rate_bps=400e3)  # 20 kB: 0.4 s
+        t0 = time.monotonic()
+        for _ in range(20):
+            client.sendall(b"x" * 1000)
+            time.sleep(0.002)
+        assert len(receive(far, 20_000)) == 20_000
+        assert time.monotonic() - t0 >= 0.3
+        client.close()
+        far.close()
+
+
+def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
+    path = tmp_path / "link.json"
+    with target() as (_server, to), LinkEmulator(to) as link:
+        path.write_text(json.dumps({"delay_ms": 100, "jitter_ms": 20, "rate_kbps": 64}))
+        apply_control(link, read_control(path))
+        assert link.shapes()["forward"] == Shape(0.1, 0.02, 64e3)
+        path.write_text(json.dumps({"cut": True, "rate_kbps": None}))
+        apply_control(link, read_control(path))
+        assert link.is_cut and link.shapes()["back"].rate_bps is None
+        path.write_text(json.dumps({"cut": False}))
+        apply_control(link, read_control(path))
+        assert not link.is_cut
+    for bad, named in (({"loss": 0.1}, "loss"), ({"cut": 1}, "cut"), ([], "object")):
+        path.write_text(json.dumps(bad))
+        with pytest.raises(ValueError, match=named):
+            read_control(path)
+
+
+def test_two_missed_heartbeats_cut_a_link_and_the_next_restores_it():
+    watch = LinkWatch(period_s=0.1)
+    assert watch.check(0.0) == [] and not watch.is_cut("s1") and watch.due(0.0) is None
+    watch.beat("s1", 0.0)
+    watch.beat("s1", 0.1)
+    assert watch.due(0.15) == pytest.approx(0.15)
+    assert watch.check(0.3) == [], "exactly two periods: not yet"
+    assert watch.check(0.31) == ["s1"] and watch.is_cut("s1") and watch.cuts == 1
+    assert watch.check(0.5) == [], "a cut is reported once"
+    assert watch.states() == {"s1": "cut"} and watch.due(0.5) is None
+    assert watch.beat("s1", 0.6) is True, "back"
+    assert watch.states() == {"s1": "up"} and not watch.is_cut("s1")
+    assert watch.beat("s1", 0.7) is False
+
+
+def test_a_source_that_never_beat_is_never_cut():
+    watch = LinkWatch(period_s=0.1)
+    watch.beat("s2", 0.0)
+    assert watch.check(10.0) == ["s2"]
+    assert not watch.is_cut("s1") and "s1" not in watch.states()
+
+
+def test_the_heartbeat_key_parses_back():
+    key = keys.heartbeat("s1")
+    assert key == "tltrack/source/s1/heartbeat"
+    info = keys.parse(key)
+    assert (info.kind, info.source, info.operator) == ("heartbeat", "s1", "source/s1")
+    assert keys.HEARTBEATS == "tltrack/source/*/heartbeat"
