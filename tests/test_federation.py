@@ -91,12 +91,13 @@ def run_episode(
     primary_env: dict[str, str] | None = None,
     sensor_env: dict[str, dict[str, str]] | None = None,
     sim_config: Path | None = None,
+    source_env: dict[str, str] | None = None,
 ) -> None:
     """The scorer, the trackers and the sensors, then sensor_sim (routers already started);
     ``sim_config``: a config file for the episodes, over the test's defaults."""
     s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db), "TLTRACK_SCORER_GRACE_S": "3"})
     s.start_service("primary_tracker", env=primary_env)
-    s.start_service("source_tracker", identity="source-s1")
+    s.start_service("source_tracker", identity="source-s1", env=source_env)
     cfg = config(steps)
     for sid, user in (("primary", "primary"), ("s1", "source-s1")):
         env = {"TLTRACK_SENSOR_SENSOR": sid, **(sensor_env or {}).get(sid, {})}
