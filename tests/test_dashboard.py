@@ -210,12 +210,14 @@ def test_bad_payloads_and_statistics_are_counted_never_raised():
         "counters": {"steps": 3, "bad": -1, "worse": "x", "float": 1.5},
         "rejected": {"by_key": {"k": 2}, "by_reason": "oops"},
         "dropped": True,
+        "links": {"s1": "cut", "s2": "maybe", "s3": 1},
     }
     assert clean_stats(junk) == {
         "counters": {"steps": 3},
         "rejected_by_key": {"k": 2},
         "rejected_by_reason": {},
         "dropped": 0,
+        "links": {"s1": "cut"},
     }
     ingest.handle(
         received(

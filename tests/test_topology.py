@@ -87,7 +87,8 @@ def test_the_routers_rules_ship_with_the_package() -> None:
 
 
 def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
-    """The primary's router: router-source-sX may put tltrack/source/sX/transfer/*, no other key."""
+    """The primary's router: router-source-sX may put tltrack/source/sX/transfer/* and its
+    heartbeat, no other key."""
     env = access_env("primary", tmp_path)
     cfg = zenoh.Config()
     cfg.insert_json5(
@@ -103,6 +104,7 @@ def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
             if "put" in rules[rid]["messages"]
             for ke in rules[rid]["key_exprs"]
         }
-        assert puts == {f"tltrack/source/{sid}/transfer/*"}, (sid, puts)
+        own = {f"tltrack/source/{sid}/transfer/*", f"tltrack/source/{sid}/heartbeat"}
+        assert puts == own, (sid, puts)
     grouped = [p for p in acl["policies"] if "source-routers" in p["subjects"]]
     assert all(rules[r]["permission"] == "deny" for p in grouped for r in p["rules"])
