@@ -157,3 +157,46 @@ def test_the_error_is_the_root_of_what_the_rmse_squares() -> None:
 
     assert squared_error([4.0, 5.0], [1.0, 1.0]) == 25.0
     assert math.sqrt(squared_error([1e6 + 0.1, -2.0], [1e6, -2.0])) == pytest.approx(0.1)
+
+
+def test_an_episodes_estimates_as_tltrack_tracks_csv(tmp_path: Path) -> None:
+    """--estimates writes the CSV `tltrack track` writes, from the states the scorer stored;
+    with several episodes in the file it asks which, naming them."""
+    from tltrack.engine.track import write_estimates
+
+    db, out, want = tmp_path / "scorer.sqlite", tmp_path / "ep-a.csv", tmp_path / "want.csv"
+    store = Store(db)
+    store.episode_start(decode(episode_start("ep-a", 2), EpisodeStart))
+    store.episode_start(decode(episode_start("ep-b", 2), EpisodeStart))
+    rows = []
+    for k in (1, 2):
+        for name in ("rpf", "tl-rpf"):
+            x = [10.0 * k, 1.0, 20.0 * k, -1.0, 0.01 * k]
+            P = (np.eye(5) * k).tolist()
+            store.estimate(
+                EstimateMsg(
+                    episode="ep-a",
+                    sender="primary",
+                    k=k,
+                    t_sensor=T0 + k,
+                    filter=name,
+                    x=x,
+                    pos=[x[0], x[2]],
+                    P=P,
+                    transfer_used=False,
+                    t_sent=T0 + k,
+                    step_ms=1.0,
+                ),
+                recv_time(k),
+            )
+            rows.append((k, name, np.array(x), np.array(P)))
+    store.commit()
+    store.close()
+    r = scores("--db", str(db), "--estimates", str(out))
+    assert r.exit_code == 2
+    assert "name one episode (--episode) of the 2 held: ['ep-a', 'ep-b']" in r.output
+    r = scores("--db", str(db), "--episode", "ep-a", "--estimates", str(out))
+    assert r.exit_code == 0, r.output
+    write_estimates(want, "ct", rows)
+    assert out.read_text() == want.read_text()
+    assert scores("--db", str(db)).exit_code == 2  # nothing asked for

@@ -20,7 +20,9 @@ from tltrack.app.common import app, console
     "    tltrack scores --jsonl - --db scorer.sqlite --episode ep-r0 | jq .error_m"
 )
 def scores(
-    jsonl: Annotated[Path, typer.Option(help="the JSON Lines file to write ('-': stdout)")],
+    jsonl: Annotated[
+        Path | None, typer.Option(help="the JSON Lines file to write ('-': stdout)")
+    ] = None,
     db: Annotated[
         Path,
         typer.Option(
@@ -28,6 +30,10 @@ def scores(
         ),
     ] = Path("out/demo/scorer.sqlite"),
     episode: Annotated[str | None, typer.Option(help="only this episode")] = None,
+    estimates: Annotated[
+        Path | None,
+        typer.Option(help="write the episode's estimates here, as `tltrack track`'s estimates.csv"),
+    ] = None,
 ) -> None:
     """Write one JSON object per filter and step: episode, filter, k, error_m, latency_ms,
     transfer_used.
@@ -36,17 +42,53 @@ def scores(
     a truth), `latency_ms` the time from the sensor's publication of z_k to the estimate's
     arrival at the scorer: the values the scorer's summary aggregates into its RMSE and latency
     percentiles. The file is read-only to this command, so a running scorer may keep writing it.
-    """
-    from tltrack.live.scores import NotAScorerFileError, open_file, step_scores
 
+    `--estimates` writes one episode's estimates (`--episode`, needed when the file holds
+    several) in the CSV of `tltrack track`: k, filter, the state's components, the position's
+    covariance.
+    """
+    from tltrack.live.scores import NotAScorerFileError, open_file
+
+    if jsonl is None and estimates is None:
+        console.print(
+            "[red]error:[/red] say what to write: --jsonl FILE, --estimates FILE, or both"
+        )
+        raise typer.Exit(2)
     try:
         conn = open_file(db)
     except NotAScorerFileError as err:
         console.print(f"[red]error:[/red] --db: {err}")
         raise typer.Exit(2) from None
+    with contextlib.closing(conn):
+        if estimates is not None:
+            _write_estimates(conn, db, episode, estimates)
+        if jsonl is not None:
+            _write_jsonl(conn, db, episode, jsonl)
+
+
+def _write_estimates(conn: sqlite3.Connection, db: Path, episode: str | None, path: Path) -> None:
+    from tltrack.engine.track import write_estimates
+    from tltrack.live.scores import estimates
+
+    try:
+        scenario, rows = estimates(conn, episode)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_estimates(path, scenario, rows)
+    except OSError as err:
+        console.print(f"[red]error:[/red] --estimates: cannot write {path}: {err.strerror}")
+        raise typer.Exit(2) from None
+    except (sqlite3.DatabaseError, ValueError, KeyError) as err:
+        console.print(f"[red]error:[/red] --db: {db}: {err}")
+        raise typer.Exit(2) from None
+    console.print(f"wrote {len(rows)} estimates to {path}")
+
+
+def _write_jsonl(conn: sqlite3.Connection, db: Path, episode: str | None, jsonl: Path) -> None:
+    from tltrack.live.scores import step_scores
+
     n = 0
     try:
-        with contextlib.closing(conn), _output(jsonl) as out:
+        with _output(jsonl) as out:
             for score in step_scores(conn, episode):
                 out.write(json.dumps(score.as_dict()) + "\n")
                 n += 1

@@ -1,11 +1,13 @@
 """Each filter's score at each step, from the scorer's SQLite file: its position error against
-the truth, its latency, and whether it used a transfer.
+the truth, its latency, and whether it used a transfer; and the estimates themselves.
 
-The scorer's summary aggregates these (``tltrack.services.scorer.summary``: the RMSE over
+The scorer's summary aggregates the scores (``tltrack.services.scorer.summary``: the RMSE over
 episodes, the latency's percentiles); ``tltrack scores --jsonl`` writes them one by one, for a
 notebook. Both compute them with :func:`squared_error` and
 :func:`tltrack.live.latency.end_to_end_ms`, so a line of the file and the summary agree to the
-last bit: ``error_m`` at k is the root of what the RMSE averages at k.
+last bit: ``error_m`` at k is the root of what the RMSE averages at k. :func:`estimates` reads an
+episode's estimates, which ``tltrack scores --estimates`` writes as the ``estimates.csv`` of
+``tltrack track`` (and ``tltrack.interop.stonesoup.to_tracks`` makes Stone Soup tracks of).
 
 :func:`open_file` opens the file read-only, so that reading it beside a running scorer changes
 nothing in it (SQLite's WAL lets a reader in while the scorer writes).
@@ -19,15 +21,19 @@ import sqlite3
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from tltrack.live import latency
+
+if TYPE_CHECKING:  # the scorer imports this module: none of the engine at run time
+    from tltrack.engine.track import Estimated
 
 #: the columns read here, of the tables of ``tltrack.services.scorer.store``
 COLUMNS = {
-    "episodes": ("episode", "started"),
+    "episodes": ("episode", "started", "config"),
     "truth": ("episode", "k", "pos"),
-    "estimates": ("episode", "filter", "k", "pos", "transfer_used", "t_sensor", "t_recv"),
+    "estimates": ("episode", "filter", "k", "pos", "x", "P", "transfer_used", "t_sensor", "t_recv"),
 }
 
 
@@ -92,3 +98,29 @@ def step_scores(db: sqlite3.Connection, episode: str | None = None) -> Iterator[
         if pos is not None and truth is not None:
             error = math.sqrt(squared_error(json.loads(pos), json.loads(truth)))
         yield StepScore(ep, name, k, error, latency.end_to_end_ms(t_sensor, t_recv), bool(used))
+
+
+def estimates(db: sqlite3.Connection, episode: str | None = None) -> tuple[str, list[Estimated]]:
+    """The motion model (``scenario``) of one episode's config and its every estimate
+    (k, filter, mean, covariance), by step and filter. ``episode`` may be left out when the file
+    holds one; ValueError naming the episodes otherwise, or when a state does not fit the model."""
+    from tltrack.models.kinds import MOTIONS
+
+    held = [e for (e,) in db.execute("SELECT episode FROM episodes ORDER BY started, episode")]
+    if episode is None:
+        if len(held) != 1:
+            raise ValueError(f"name one episode (--episode) of the {len(held)} held: {held}")
+        episode = held[0]
+    row = db.execute("SELECT config FROM episodes WHERE episode = ?", (episode,)).fetchone()
+    if row is None:
+        raise ValueError(f"no episode {episode!r} (held: {held})")
+    scenario = json.loads(row[0])["scenario"]
+    n_x = len(MOTIONS.get(scenario).components)
+    out: list[Estimated] = []
+    query = "SELECT k, filter, x, P FROM estimates WHERE episode = ? ORDER BY k, filter"
+    for k, name, x, P in db.execute(query, (episode,)):
+        mean, cov = np.asarray(json.loads(x), dtype=float), np.asarray(json.loads(P), dtype=float)
+        if mean.shape != (n_x,) or cov.shape != (n_x, n_x):
+            raise ValueError(f"{name} at k = {k}: a state of {mean.size}, not {scenario}'s {n_x}")
+        out.append((k, name, mean, cov))
+    return scenario, out
