@@ -112,15 +112,20 @@ def next_episode(s: supervisor.Stack, K: int, back: list[str]) -> None:
 
 
 class TokenClock:
-    """When the source tracker's liveliness token last appeared, as the referee sees it."""
+    """When the source tracker's liveliness token appeared again after it was seen gone, as the
+    referee sees it. The token present when the clock starts is no return: under load its first
+    sighting can arrive after the kill."""
 
     def __init__(self, endpoint: str) -> None:
         self._session = session(endpoint, "referee")
         self.back: float | None = None
+        self._gone = False
         self._watcher = LivelinessWatcher(self._session, SOURCE_TOKEN, self._on_change)
 
     def _on_change(self, _key: str, up: bool) -> None:
-        if up:
+        if not up:
+            self._gone = True
+        elif self._gone:
             self.back = time.time()
 
     def close(self) -> None:

@@ -138,15 +138,19 @@ def test_a_cut_link_is_noticed_within_two_periods_and_transfers_resume(tmp_path)
 def test_a_link_delayed_by_a_period_with_jitter_refuses_late_transfers_and_steps_on(tmp_path):
     """200 ms ± 40 ms each way, a deadline of 10 ms: the transfer for step k+1 leaves the source
     right after its step k, and comes from 40 ms before to 40 ms after z_{k+1} (and the source's
-    step): some in time, some late. The 0.1 s heartbeat's arrivals spread by at most twice the
-    jitter, under its 0.2 s timeout: a slow link is not a cut."""
+    step): some in time, some late. A slow link is not a cut: the heartbeat's arrivals spread by
+    up to twice the jitter (80 ms) beyond its period, so it beats every 0.2 s here (a 0.4 s
+    timeout); the 0.1 s default left 20 ms to spare, and a loaded machine took a beat for a cut."""
     db = tmp_path / "scorer.sqlite"
     K = 50
     with fed.federation(tmp_path) as (s, relays):
         # from the start: a delay that sets in while heartbeats flow is a silence of its length
         relays[LINK].shape(delay_s=PERIOD_S, jitter_s=0.04)
         s.start_router()
-        fed.run_episode(s, db, K, PACE, primary_env={"TLTRACK_PRIMARY_DEADLINE_MS": "10"})
+        beat = "0.2"
+        primary = {"TLTRACK_PRIMARY_DEADLINE_MS": "10", "TLTRACK_PRIMARY_HEARTBEAT_S": beat}
+        source = {"TLTRACK_SOURCE_HEARTBEAT_S": beat}
+        fed.run_episode(s, db, K, PACE, primary_env=primary, source_env=source)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         done = lambda: primary_stats(db).get("counters", {}).get("steps") == K  # noqa: E731
