@@ -113,14 +113,17 @@ def next_episode(s: supervisor.Stack, K: int, back: list[str]) -> None:
 
 class TokenClock:
     """When the source tracker's liveliness token appeared again after it was seen gone, as the
-    referee sees it. The token present when the clock starts is no return: under load its first
-    sighting can arrive after the kill."""
+    referee sees it. Made before a kill, it first waits to see the token there: under load the
+    history's sighting of it came after the kill, and was taken for the return."""
 
     def __init__(self, endpoint: str) -> None:
         self._session = session(endpoint, "referee")
         self.back: float | None = None
         self._gone = False
         self._watcher = LivelinessWatcher(self._session, SOURCE_TOKEN, self._on_change)
+        if not self._watcher.wait_until(SOURCE_TOKEN, True, 30):
+            self.close()
+            raise AssertionError("the source's token was never seen")
 
     def _on_change(self, _key: str, up: bool) -> None:
         if not up:
