@@ -30,6 +30,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from tltrack.config.target_classes import TARGET_CLASSES, TargetClassName
+from tltrack.config.timeline import Clock, Timeline, us
 from tltrack.declare import Parameter, UnknownKindError
 from tltrack.filters.kinds import FILTERS
 from tltrack.models.detection import Detection
@@ -278,6 +279,26 @@ class SourceSpec(BaseModel):
     link: LinkSpec | None = Field(
         None, description="the engine's lossy, late link to the primary; default: perfect"
     )
+    period_s: float | None = Field(
+        None,
+        gt=0,
+        allow_inf_nan=False,
+        description="its sensor's sampling period; default: Ts",
+        json_schema_extra=unit("s"),
+    )
+    phase_s: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="its first sample is at phase_s + period_s, in [0, period_s)",
+        json_schema_extra=unit("s"),
+    )
+    clock_offset_s: float = Field(
+        0.0,
+        allow_inf_nan=False,
+        description="what its clock reads minus the true time, within max_clock_offset_s",
+        json_schema_extra=unit("s"),
+    )
 
     @field_validator("filter")
     @classmethod
@@ -308,7 +329,38 @@ class Config(BaseModel):
         1.0, gt=0, allow_inf_nan=False, description="sampling period", json_schema_extra=unit("s")
     )
     K: int = Field(
-        100, ge=1, le=100_000, description="time steps per run", json_schema_extra=unit("1")
+        100,
+        ge=1,
+        le=100_000,
+        description="the primary's steps per run (given duration_s: derived from it)",
+        json_schema_extra=unit("1"),
+    )
+    duration_s: float | None = Field(
+        None,
+        gt=0,
+        allow_inf_nan=False,
+        description="an episode's length; default: primary_phase_s + K Ts",
+        json_schema_extra=unit("s"),
+    )
+    primary_phase_s: float = Field(
+        0.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="the primary samples every Ts from primary_phase_s, in [0, Ts)",
+        json_schema_extra=unit("s"),
+    )
+    primary_clock_offset_s: float = Field(
+        0.0,
+        allow_inf_nan=False,
+        description="what the primary's clock reads minus the true time",
+        json_schema_extra=unit("s"),
+    )
+    max_clock_offset_s: float = Field(
+        1.0,
+        ge=0,
+        allow_inf_nan=False,
+        description="the largest clock offset an operator may have",
+        json_schema_extra=unit("s"),
     )
     x0: list[float] = Field(
         description="true initial state", json_schema_extra=unit("the motion model's components")
@@ -512,6 +564,7 @@ class Config(BaseModel):
         if self.primary_position is not None and sensor is not None and sensor.position:
             raise ValueError("give either primary_position or primary_sensor.position, not both")
         self._check_modes()
+        self._check_clocks()
         for sid in self.sensor_ids:
             try:
                 detection_of(self, sid)
@@ -519,6 +572,47 @@ class Config(BaseModel):
                 where = "primary_detection" if sid == PRIMARY else f"sources.{sid}.detection"
                 raise ValueError(f"{where}: {err}") from None
         return self
+
+    def _check_clocks(self) -> None:
+        own = [("primary", "Ts", self.Ts, self.primary_phase_s, self.primary_clock_offset_s)]
+        own += [
+            (f"sources.{s.id}", "period_s", s.period_s or self.Ts, s.phase_s, s.clock_offset_s)
+            for s in self.sources
+        ]
+        for who, period, T, phase, offset in own:
+            where = "primary_" if who == "primary" else f"{who}."
+            if phase >= T:
+                raise ValueError(f"{where}phase_s = {phase:g} s is not in [0, {period} = {T:g} s)")
+            if abs(offset) > self.max_clock_offset_s:
+                raise ValueError(
+                    f"{where}clock_offset_s = {offset:g} s is beyond max_clock_offset_s = "
+                    f"{self.max_clock_offset_s:g} s"
+                )
+        if self.duration_s is not None:
+            K = Clock(us(self.Ts), us(self.primary_phase_s)).count(us(self.duration_s))
+            if K < 1:
+                raise ValueError(f"duration_s = {self.duration_s:g} s holds no primary sample")
+            if "K" in self.model_fields_set and self.K != K:
+                raise ValueError(f"give duration_s or K, not both: duration_s holds K = {K}")
+            object.__setattr__(self, "K", K)
+        grid = self.timeline.grid_us  # refuses periods and phases with no common grid
+        if self.truth == "file" and grid != us(self.Ts):
+            raise ValueError("a truth file is resampled at Ts: every period and phase must be Ts's")
+
+    @property
+    def timeline(self) -> Timeline:
+        """When each operator samples, and what its clock reads then."""
+        clocks = {
+            PRIMARY: Clock(us(self.Ts), us(self.primary_phase_s), us(self.primary_clock_offset_s))
+        }
+        for s in self.sources:
+            clocks[s.id] = Clock(us(s.period_s or self.Ts), us(s.phase_s), us(s.clock_offset_s))
+        duration = self.duration_s
+        return Timeline(
+            clocks,
+            us(duration) if duration is not None else clocks[PRIMARY].sample(self.K),
+            PRIMARY,
+        )
 
     def _check_modes(self) -> None:
         modes, Pi = self.motion_modes, self.mode_transition

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import LinkSpec
+from tltrack.config.timeline import US
 from tltrack.engine.registry import FilterSpec, Role, build, parse, recovery, source_name
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
@@ -60,6 +61,7 @@ class StepRecord:
     transfer: Observation | None = None  #: a source's (eta_hat, P_eta_eta) for k + 1
     #: per run, the NIS of the filter's own z_k before its update (None: no z_k)
     nis: Array | None = None
+    operator: str = PRIMARY  #: whose step k this is (the source's id, for a source filter)
 
 
 class Collector(Protocol):
@@ -102,14 +104,16 @@ class Direct:
     source's transfers by whole steps while they still claim to be current: a stale source
     (:mod:`tltrack.engine.faults`)."""
 
-    def __init__(self, lag: Mapping[str, int] | None = None) -> None:
+    def __init__(self, lag: Mapping[str, int] | None = None, ahead: int = 1) -> None:
+        """``ahead``: how many steps ahead a source's step sends for (a slower source's)."""
         self.lag = dict(lag or {})
+        self.ahead = ahead
         self._made: dict[Link, dict[int, Observation]] = {}
 
     def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
         made = self._made.setdefault(link, {})
         made[k_apply] = transfer
-        made.pop(k_apply - self.lag.get(link[1], 0) - 2, None)
+        made.pop(k_apply - self.lag.get(link[1], 0) - self.ahead - 1, None)
 
     def receive(self, link: Link, k: int) -> Observation | None:
         return self._made.get(link, {}).get(k - self.lag.get(link[1], 0))
@@ -137,11 +141,13 @@ class Lossy:
         links: Mapping[str, LinkSpec],
         Ts: float,
         others: Channel | None = None,
+        ahead: int = 1,
     ) -> None:
-        self.runs, self.links, self.Ts = list(runs), dict(links), Ts
+        """``ahead``: how many steps ahead a source's step sends for (a slower source's)."""
+        self.runs, self.links, self.Ts, self.ahead = list(runs), dict(links), Ts, ahead
         self.others: Channel = others or Direct()
         self._rngs = {sid: [stream(seed, r, f"link/{sid}") for r in self.runs] for sid in links}
-        #: per (source id, k_apply) of the last two steps: the runs its transfers reach
+        #: per (source id, k_apply) of the last steps: the runs its transfers reach
         self.reached: dict[tuple[str, int], NDArray[np.bool_]] = {}
         self._made: dict[Link, dict[int, Observation]] = {}
         B = len(self.runs)
@@ -158,7 +164,7 @@ class Lossy:
             self.lost[sid] += lost
             self.late[sid] += late
             self.reached[sid, k_apply] = ~lost & ~late
-            self.reached.pop((sid, k_apply - 2), None)
+            self.reached.pop((sid, k_apply - self.ahead - 1), None)
         return self.reached[sid, k_apply]
 
     def send(self, link: Link, k_apply: int, transfer: Observation) -> None:
@@ -167,7 +173,7 @@ class Lossy:
             return
         ok = self._arrives(link[1], k_apply)
         made = self._made.setdefault(link, {})
-        made.pop(k_apply - 2, None)
+        made.pop(k_apply - self.ahead - 1, None)
         if ok.any():
             made[k_apply] = replace(
                 transfer, mask=ok if transfer.mask is None else ok & transfer.mask
@@ -205,7 +211,8 @@ class Sources:
         for name, sid in links:
             spec = parse(name)
             own = setup.sensors[sid]
-            filt = build(spec, setup, x0_hat, runs, source_id=sid)
+            start, P0 = setup.operator(sid).start(sid, x0_hat)
+            filt = build(spec, setup.operator(sid), start, runs, source_id=sid, P0=P0)
             self.roles[name, sid] = Source(filt, own.model, own.R, recovery(spec, setup.cfg))
             self.names[name, sid] = reported_name(spec, sid, n)
 
@@ -226,9 +233,15 @@ class Sources:
             name_ = self.names[name, sid]
             _tell(
                 self.collectors,
-                StepRecord(k, name_, "source", role.filter, est, dt, None, transfer, role.nis),
+                StepRecord(k, name_, "source", role.filter, est, dt, None, transfer, role.nis, sid),
             )
         return out
+
+    def ahead(self, link: Link, horizon_s: float) -> Observation:
+        """Source filter ``link``'s transfer for ``horizon_s`` after its last step, off its own
+        steps (:meth:`~tltrack.filters.transfer.Source.ahead`)."""
+        motion = self.setup.motion.with_period(horizon_s)
+        return replace(self.roles[link].ahead(motion), origin=link[1])
 
     def recovered(self, link: Link) -> bool:
         """Did the last step reinitialise this source filter in any run?"""
@@ -262,8 +275,10 @@ class Primaries:
         cfg = setup.cfg
         self.roles: dict[str, tuple[FilterSpec, Primary]] = {}
         self._twin_of: dict[str, str] = {}  #: isolated name -> the robust primary stepping it
+        own = setup.operator(PRIMARY)
+        x0_hat, P0 = own.start(PRIMARY, x0_hat)
         for spec in sorted(specs, key=lambda s: s.role == "robust"):  # isolated ones first
-            filt = build(spec, setup, x0_hat, runs)
+            filt = build(spec, own, x0_hat, runs, P0=P0)
             policy = twin = None
             if spec.role == "robust":
                 policy = TransferPolicy(cfg.gate_probability, cfg.transfer_budget)
@@ -273,7 +288,7 @@ class Primaries:
                     self._twin_of[spec.kind] = spec.name
                 else:
                     iso = parse(spec.kind)
-                    twin = Primary(build(iso, setup, x0_hat, runs), None, recovery(iso, cfg))
+                    twin = Primary(build(iso, own, x0_hat, runs, P0=P0), None, recovery(iso, cfg))
             role = Primary(filt, policy, recovery(spec, cfg), twin)
             self.roles[spec.name] = (spec, role)
         self.roles = {s.name: self.roles[s.name] for s in specs}  # in the order asked for
@@ -354,6 +369,10 @@ class Driver:
 
     ``setups`` may add configurations that differ from the first only in the primary's sensor
     noise (an intensity sweep): the sources step once and feed the primaries of each.
+
+    Operators with their own periods, phases and clocks (:mod:`tltrack.config.timeline`) are
+    stepped by :meth:`tick`, one truth-grid tick at a time; :meth:`step` is the paper's
+    synchronous step k, which is tick k there.
     """
 
     def __init__(
@@ -369,9 +388,10 @@ class Driver:
         """``collectors[i]`` hear of setup i's filters (the sources' steps go to every one)."""
         self.setups = list(setups)
         base = self.setups[0]
+        self.timeline = base.cfg.timeline
         hear = list(collectors) or [[] for _ in self.setups]
         everyone = [c for cs in hear for c in cs]
-        self.channel: Channel = channel or Direct()
+        self.channel: Channel = channel or Direct(ahead=self.timeline.sends_ahead)
         self.sources = Sources(base, source_links(names, base), x0_hat, runs, everyone)
         specs = primary_specs(names)
         self.primaries = [
@@ -379,10 +399,31 @@ class Driver:
         ]
 
     def step(self, k: int, z: Sequence[Mapping[str, Statement | None]]) -> None:
-        """Step k: ``z[i]`` maps each sensor id of setup i to its z_k (the sources' are read from
-        the first)."""
-        for link, transfer in self.sources.step(k, z[0]).items():
-            self.channel.send(link, k + 1, transfer)
+        """Step k of synchronous operators: ``z[i]`` maps each sensor id of setup i to its z_k
+        (the sources' are read from the first)."""
+        if not self.timeline.synchronous:
+            raise ValueError("operators with their own periods, phases or clocks step by tick()")
+        self.tick(k, z)
+
+    def tick(self, n: int, z: Sequence[Mapping[str, Statement | None]]) -> None:
+        """Truth-grid tick n: the sources that sample now step, each sending its transfers for
+        the primary's samples until its next step (:meth:`Timeline.targets
+        <tltrack.config.timeline.Timeline.targets>`), then the primary steps if it samples now.
+        ``z[i]`` maps each sensor id of setup i that samples at n to its statement."""
+        now = self.timeline.at(n)
+        for sid, k in now.items():
+            if sid == PRIMARY:
+                continue
+            links = [link for link in self.sources.roles if link[1] == sid]
+            period = self.timeline.clocks[sid].period_us
+            for link, transfer in self.sources.step(k, z[0], only=links).items():
+                for j, horizon in self.timeline.targets(sid, k):
+                    own = horizon == period  # the paper's transfer: the filter's own prediction
+                    sent = transfer if own else self.sources.ahead(link, horizon / US)
+                    self.channel.send(link, j, sent)
+        if PRIMARY not in now:
+            return
+        k = now[PRIMARY]
         cfg = self.setups[0].cfg
         ids = self.setups[0].source_ids
 
@@ -391,7 +432,7 @@ class Driver:
                 got = (self.channel.receive((source_name(spec, cfg, i), i), k) for i in ids)
                 return [t for t in got if t is not None]
             if spec.role == "fusion":
-                return [o for i in ids if (o := z[0][i]) is not None]
+                return [o for i in ids if (o := z[0].get(i)) is not None]
             return []
 
         for zi, half in zip(z, self.primaries, strict=True):

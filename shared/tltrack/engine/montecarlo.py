@@ -15,7 +15,7 @@ diverged, not merely ended on one bad step.
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import nullcontext
 from dataclasses import dataclass, field
@@ -170,11 +170,15 @@ class _Score:
 
 class Scores:
     """A collector (:mod:`~tltrack.engine.driver`): every filter's errors against the truth
-    (K + 1, B, n_x) of a batch, and with ``timing`` its wall time per step."""
+    (K + 1, B, n_x) of a batch, and with ``timing`` its wall time per step.
+
+    Operators with their own periods are each scored at their own samples: ``truth`` then maps
+    each operator's id to the truth at its steps 0..K_i.
+    """
 
     def __init__(
         self,
-        truth: Array,
+        truth: Array | Mapping[str, Array],
         layout: Layout,
         timing: bool,
         keep_tracks: bool,
@@ -189,13 +193,14 @@ class Scores:
 
     def __call__(self, record: StepRecord) -> None:
         r = record
+        truth = self.truth[r.operator] if isinstance(self.truth, Mapping) else self.truth
         score = self._scores.get(r.name)
         if score is None:
-            K, n_z = len(self.truth) - 1, self.n_z(r.name)
+            K, n_z = len(truth) - 1, self.n_z(r.name)
             score = self._scores[r.name] = _Score(K, self.layout, self.keep_tracks, n_z)
         if self.timing:
             score.stats.step_ms.append(r.seconds * 1e3)
-        score.add(r.k, r.estimate, self.truth[r.k])
+        score.add(r.k, r.estimate, truth[r.k])
         if r.nis is not None and score.stats.n_z:
             score.add_nis(r.nis)
         if r.used is not None:
@@ -227,6 +232,11 @@ def run_batch(
 def check_filters(cfg: Config, names: Sequence[str]) -> None:
     """Refuse, before any run, filters that cannot work with the configured sensors: a
     ``ValueError`` that says why (robust transfer needs sensors that fix a position)."""
+    if not cfg.timeline.synchronous and any(parse(n).role == "fusion" for n in names):
+        raise ValueError(
+            "centralized fusion takes every sensor's z_k at the primary's step: it needs every "
+            "operator on one period, phase and clock"
+        )
     if any(parse(n).role == "robust" for n in names):
         setup = Setup(cfg)
         for sid in setup.sensor_ids:
@@ -273,10 +283,13 @@ def run_sweep_batch(
     base = setups[0]
     sims = [[simulate(s, r) for r in runs] for s in setups]
     x0_hat = np.stack([s.x0_hat for s in sims[0]], axis=1)  # (n, B)
-    truth = np.stack([s.truth for s in sims[0]], axis=1)  # (K + 1, B, n)
-    # sensor id -> (K, n_z, B), per configuration (the sources' are the same in all)
+    truth = np.stack([s.truth for s in sims[0]], axis=1)  # (ticks + 1, B, n)
+    timeline = base.cfg.timeline
+    # each operator scored at its own samples: the truth at its steps 0..K_i
+    own = {i: truth[[0, *timeline.indices(i)]] for i in base.sensor_ids}
+    # sensor id -> (K_i, n_z, B), per configuration (the sources' are the same in all)
     z = [{i: np.stack([s.z[i] for s in sim], axis=2) for i in base.sensor_ids} for sim in sims]
-    scores = [Scores(truth, s.layout, timing, keep_tracks, own_n_z(s)) for s in setups]
+    scores = [Scores(own, s.layout, timing, keep_tracks, own_n_z(s)) for s in setups]
     driver = Driver(
         setups,
         names,
@@ -285,23 +298,29 @@ def run_sweep_batch(
         channel=channel(base.cfg, runs),
         collectors=[[s] for s in scores],
     )
-    for k in range(1, base.cfg.K + 1):
-        driver.step(
-            k,
-            [
-                {i: s.sensors[i].statement(zi[i][k - 1], _scans(sim, i, k)) for i in s.sensor_ids}
-                for s, zi, sim in zip(setups, z, sims, strict=True)
-            ],
-        )
+    for n in range(1, timeline.ticks + 1):
+        now = timeline.at(n)
+        if now:
+            driver.tick(
+                n,
+                [
+                    {
+                        i: s.sensors[i].statement(zi[i][k - 1], _scans(sim, i, k))
+                        for i, k in now.items()
+                    }
+                    for s, zi, sim in zip(setups, z, sims, strict=True)
+                ],
+            )
     return [s.close() for s in scores]
 
 
 def channel(cfg: Config, runs: Sequence[int]) -> Channel:
     """The sources' links to the primary: lossy and late where the config gives a ``link``
     (:class:`Lossy`), direct for the others, a stale source's transfers late (:class:`Direct`)."""
-    direct = Direct({s.id: transfer_lag(cfg, s.id) for s in cfg.sources})
+    ahead = cfg.timeline.sends_ahead
+    direct = Direct({s.id: transfer_lag(cfg, s.id) for s in cfg.sources}, ahead)
     links = {s.id: s.link for s in cfg.sources if s.link is not None}
-    return Lossy(runs, cfg.seed, links, cfg.Ts, direct) if links else direct
+    return Lossy(runs, cfg.seed, links, cfg.Ts, direct, ahead) if links else direct
 
 
 def _scans(sims: Sequence[Run], sensor_id: str, k: int) -> list[Array] | None:

@@ -104,8 +104,10 @@ def build(
     x0_hat: NDArray[np.float64],
     runs: Sequence[int],
     source_id: str | None = None,
+    P0: NDArray[np.float64] | None = None,
 ) -> Filter:
-    """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0).
+    """A filter of ``spec``'s kind for the batch ``runs``, started at (x0_hat, P0) (default:
+    the config's P0).
 
     With motion modes (config ``motion_modes``), a particle kind carries a mode per particle,
     and any other kind runs one filter per mode inside an interacting multiple-model filter.
@@ -114,7 +116,7 @@ def build(
     cls = FILTERS.get(spec.kind)
     rngs = streams(cfg.seed, list(runs), stream_purpose(spec, source_id)) if cls.particle else None
     params = cfg.filter_parameters(spec.kind)
-    P0, N = setup.P0, cfg.particles
+    P0, N = (setup.P0 if P0 is None else P0), cfg.particles
     modes = setup.modes
     if modes is None:
         return cls.build(setup.motion, x0_hat, P0, particles=N, rngs=rngs, params=params)

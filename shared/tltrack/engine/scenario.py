@@ -32,15 +32,18 @@ Array = NDArray[np.float64]
 
 
 def truth(setup: Setup, run: int) -> Array:
-    """The true states x_0..x_K of one run, shape (K + 1, n_x)."""
+    """The true states of one run on the truth grid (:mod:`tltrack.config.timeline`), shape
+    (ticks + 1, n_x): x_0..x_K when every operator samples every Ts, as in the paper."""
     cfg = setup.cfg
     if cfg.truth == "file":
         return file_truth(cfg)
-    model = setup.motion
-    x = np.empty((cfg.K + 1, cfg.n_x))
+    timeline = cfg.timeline
+    ticks = timeline.ticks
+    model = setup.motion if timeline.grid_s == cfg.Ts else setup.motion.with_period(timeline.grid_s)
+    x = np.empty((ticks + 1, cfg.n_x))
     x[0] = cfg.x0
     if cfg.truth == "noise-free":
-        for k in range(1, cfg.K + 1):
+        for k in range(1, ticks + 1):
             x[k] = model.f(x[k - 1])
         return x
     g = (
@@ -48,18 +51,24 @@ def truth(setup: Setup, run: int) -> Array:
         if cfg.truth == "fixed"
         else stream(cfg.seed, run, "truth")
     )
-    eps = g.standard_normal((cfg.K, model.Q_sqrt.shape[1]))
-    for k in range(1, cfg.K + 1):
+    eps = g.standard_normal((ticks, model.Q_sqrt.shape[1]))
+    for k in range(1, ticks + 1):
         x[k] = model.f(x[k - 1]) + model.Q_sqrt @ eps[k - 1]
     return x
 
 
+def sampled(setup: Setup, x: Array, sensor_id: str) -> Array:
+    """The rows of truth ``x`` at one operator's samples 1..K_i, (K_i, n_x)."""
+    return x[setup.cfg.timeline.indices(sensor_id)]
+
+
 def measurements(setup: Setup, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:
-    """z_1..z_K of one sensor along truth ``x``, shape (K, n_z), angles wrapped to (-pi, pi]."""
+    """z_1..z_K of one sensor along truth ``x`` at its own samples, shape (K, n_z), angles
+    wrapped to (-pi, pi]."""
     s = setup.sensor(sensor_id)
     I_w = setup.intensity(sensor_id)
     g = stream(setup.cfg.seed, run, f"meas/{sensor_id}")
-    seen = observed_truth(setup, sensor_id, x)[1:]
+    seen = sampled(setup, observed_truth(setup, sensor_id, x), sensor_id)
     return s.draw(seen, I_w, g, miscalibration(setup.cfg, sensor_id, s, I_w))
 
 
@@ -70,7 +79,9 @@ def scans(setup: Setup, run: int, x: Array, z: Array, sensor_id: str = PRIMARY) 
     if own.detection.trivial:
         return None
     g = stream(setup.cfg.seed, run, f"detect/{sensor_id}")
-    seen = own.detection.inside(own.model.h(observed_truth(setup, sensor_id, x)[1:].T))
+    seen = own.detection.inside(
+        own.model.h(sampled(setup, observed_truth(setup, sensor_id, x), sensor_id).T)
+    )
     drawn = [own.detection.scan(z[k], bool(seen[k]), g) for k in range(len(z))]
     return Scans([d[0] for d in drawn], [d[1] for d in drawn])
 
@@ -104,8 +115,8 @@ class Run:
     """Everything the filters of one run are given, and the truth they are scored against."""
 
     run: int
-    truth: Array  # (K + 1, n_x)
-    z: dict[str, Array]  # sensor id -> (K, n_z): the target's measurements
+    truth: Array  # (ticks + 1, n_x) on the truth grid: (K + 1, n_x) in the paper's case
+    z: dict[str, Array]  # sensor id -> (K_i, n_z): the target's measurements at its samples
     x0_hat: Array  # (n_x,)
     scans: dict[str, Scans] = field(default_factory=dict)  # the sensors that miss or clutter
 

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import PRIMARY, Config, SensorSpec, detection_of, position_of
+from tltrack.config.timeline import US
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.coordinated_turn import CoordinatedTurn
@@ -32,19 +33,22 @@ Array = NDArray[np.float64]
 __all__ = ["PRIMARY", "OwnSensor", "Setup", "from_spec", "intensity", "motion_model", "sensor_spec"]
 
 
-def motion_model(cfg: Config) -> MotionModel:
-    """The scenario's motion model, with the noise parameters it declares."""
+def motion_model(cfg: Config, period: float | None = None) -> MotionModel:
+    """The scenario's motion model over ``period`` (default Ts), with the noise parameters it
+    declares."""
     cls = MOTIONS.get(cfg.scenario)
-    return cls.build(cfg.Ts, {p.name: float(getattr(cfg, p.name)) for p in cls.parameters})
+    T = cfg.Ts if period is None else period
+    return cls.build(T, {p.name: float(getattr(cfg, p.name)) for p in cls.parameters})
 
 
-def motion_modes(cfg: Config) -> MotionModes | None:
-    """The filters' modes, each in the coordinated turn's state, with their Markov chain; the
-    modes start equally likely."""
+def motion_modes(cfg: Config, period: float | None = None) -> MotionModes | None:
+    """The filters' modes over ``period`` (default Ts), each in the coordinated turn's state,
+    with their Markov chain; the modes start equally likely."""
     if cfg.motion_modes is None:
         return None
+    T = cfg.Ts if period is None else period
     models: list[MotionModel] = [
-        Straight(cfg.Ts, m.q1) if m.kind == "cv" else CoordinatedTurn(cfg.Ts, m.q1, m.q2)
+        Straight(T, m.q1) if m.kind == "cv" else CoordinatedTurn(T, m.q1, m.q2)
         for m in cfg.motion_modes
     ]
     kinds = [m.kind for m in cfg.motion_modes]
@@ -123,19 +127,40 @@ class OwnSensor:
 
 @dataclass(frozen=True)
 class Setup:
-    """A config's motion model and each operator's sensor, built once."""
+    """A config's motion model and each operator's sensor, built once.
+
+    ``period``: the step of the motion models (default Ts); an operator that samples at its own
+    period builds its filters from :meth:`operator`'s setup.
+    """
 
     cfg: Config
+    period: float | None = None
 
     @cached_property
     def motion(self) -> MotionModel:
         """The scenario's model: the truth's, and the filters' unless they have modes."""
-        return motion_model(self.cfg)
+        return motion_model(self.cfg, self.period)
 
     @cached_property
     def modes(self) -> MotionModes | None:
         """The filters' motion modes (config ``motion_modes``), or None: the scenario's model."""
-        return motion_modes(self.cfg)
+        return motion_modes(self.cfg, self.period)
+
+    def operator(self, sensor_id: str) -> Setup:
+        """This setup as operator ``sensor_id``'s filters step: over its own period."""
+        period = self.cfg.timeline.clocks[sensor_id].period_us / US
+        return self if period == (self.period or self.cfg.Ts) else Setup(self.cfg, period)
+
+    def start(self, sensor_id: str, x0_hat: Array) -> tuple[Array, Array]:
+        """Operator ``sensor_id``'s prior (x0_hat (n_x, B), P0) at its step 0, one period before
+        its first sample: the initial estimate at t = 0 carried over its phase (mean through f,
+        covariance F P0 F' + Q with F at the config's x0); at phase 0, (x0_hat, P0) itself."""
+        phase = self.cfg.timeline.clocks[sensor_id].phase_us / US
+        if phase == 0:
+            return x0_hat, self.P0
+        model = self.motion.with_period(phase)
+        F = model.F(np.asarray(self.cfg.x0, dtype=float))
+        return model.f(x0_hat), F @ self.P0 @ F.T + model.Q
 
     @property
     def layout(self) -> Layout:

@@ -274,7 +274,8 @@ class SigmaPointFilter:
 
 
 #: the UKF's scaling parameter: the centre's weight is kappa / (n + kappa)
-KAPPA = Parameter("kappa", "1", "UKF scaling parameter (Julier & Uhlmann 2000)", default=2.0)
+UKF_KAPPA = 2.0
+KAPPA = Parameter("kappa", "1", "UKF scaling parameter (Julier & Uhlmann 2000)", default=UKF_KAPPA)
 
 
 class _RuleKind(SigmaPointFilter, abc.ABC):

@@ -28,7 +28,8 @@ from tltrack.filters.association import associate, combined, likeliest
 from tltrack.filters.base import Array, Estimate, Filter
 from tltrack.filters.consistency import nis
 from tltrack.filters.decision import TransferPolicy
-from tltrack.models.base import MeasurementModel
+from tltrack.filters.sigma_point import UKF_KAPPA, SigmaPointFilter, unscented
+from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 from tltrack.models.scan import Scan, Statement
 
@@ -50,6 +51,7 @@ class Source:
         self.recovered: NDArray[np.bool_] | None = None  #: per run, by the last step
         self.nis: Array | None = None  #: per run, of the last step's z_k (None: no z_k)
         self._upcoming: Observation | None = None  #: the last transfer: its z_k's prediction
+        self._posterior: Estimate | None = None  #: the last step's estimate
 
     def step(self, z: Statement | None) -> tuple[Estimate, Observation]:
         if self._upcoming is None:
@@ -63,10 +65,23 @@ class Source:
             if self.recover is not None:
                 self.recovered = self.recover(self.filter, own.anchor)
             self.filter.update([z])
-        est = self.filter.estimate()
+        est = self._posterior = self.filter.estimate()
         self.filter.predict()
         self._upcoming = self.filter.predicted_observation(self.sensor, self.R)
         return est, self._upcoming
+
+    def ahead(self, motion: MotionModel) -> Observation:
+        """The transfer for a time off the source's own steps, ``motion``'s period after its last
+        one (operators with their own periods, :mod:`tltrack.config.timeline`): the last
+        posterior N(x_hat, P) carried over it and through the sensor by the unscented transform
+        (eq. BTL_sr_eta_1 with a Gaussian for the posterior). It draws no random number, so the
+        filter's own steps are those of its isolated twin still."""
+        if self._posterior is None:
+            raise RuntimeError("a source sends transfers after its first step")
+        m = self._posterior.mean.T
+        carried = SigmaPointFilter(motion, unscented(len(m), UKF_KAPPA), m, self._posterior.cov)
+        carried.predict()
+        return carried.predicted_observation(self.sensor, self.R)
 
 
 class Primary:

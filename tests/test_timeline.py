@@ -1,0 +1,135 @@
+"""Operators with their own periods, phases and clocks (issue 34): the timeline, the truth grid,
+the transfers' horizons, and the engine stepping them."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from tltrack.config import Config, ConfigError, make_config
+from tltrack.config.timeline import US
+from tltrack.engine.driver import Sources
+from tltrack.engine.montecarlo import run_batch, trace_run
+from tltrack.engine.scenario import sampled, simulate, truth
+from tltrack.engine.setup import PRIMARY, Setup
+
+pytestmark = pytest.mark.unit
+
+BASE = {"preset": "arasaratnam-haykin", "K": 20, "particles": 300, "seed": 4}
+
+
+def config(**source: float) -> Config:
+    return make_config(BASE, sources=[{"id": "s1", **source}])
+
+
+def test_the_papers_timeline_is_one_grid_at_ts_and_a_transfer_for_k_plus_1() -> None:
+    t = make_config(BASE).timeline
+    assert t.synchronous and t.grid_us == US and t.ticks == 20
+    assert t.indices(PRIMARY).tolist() == t.indices("s1").tolist() == list(range(1, 21))
+    assert [t.targets("s1", k) for k in (1, 7, 20)] == [[(2, US)], [(8, US)], [(21, US)]]
+    assert t.sends_ahead == 1
+
+
+def test_a_slower_source_sends_for_each_primary_sample_until_its_next_step() -> None:
+    t = config(period_s=4.0).timeline
+    assert not t.synchronous and t.grid_us == US and t.steps("s1") == 5
+    # after its step at t = 4 s: the primary's samples at 5, 6, 7 and 8 s
+    assert t.targets("s1", 1) == [(j, (j - 4) * US) for j in (5, 6, 7, 8)]
+    assert t.sends_ahead == 4
+
+
+def test_a_faster_source_sends_only_from_its_last_step_before_each_primary_sample() -> None:
+    t = config(period_s=0.25).timeline
+    assert t.grid_us == US // 4 and t.ticks == 80 and t.steps("s1") == 80
+    sent = {k: t.targets("s1", k) for k in range(1, 9)}
+    # steps at 0.75 s and 1.75 s send for the primary's 1 s and 2 s, a quarter period ahead
+    assert {k: v for k, v in sent.items() if v} == {3: [(1, US // 4)], 7: [(2, US // 4)]}
+
+
+def test_a_clock_offset_moves_the_horizon_and_equal_offsets_cancel() -> None:
+    assert config(clock_offset_s=0.25).timeline.targets("s1", 3) == [(4, 3 * US // 4)]
+    both = make_config(
+        BASE, primary_clock_offset_s=0.25, sources=[{"id": "s1", "clock_offset_s": 0.25}]
+    )
+    assert both.timeline.targets("s1", 3) == [(4, US)]
+    names = ["ukf", "tl-ukf", "pf", "tl-pf"]
+    plain, shifted = trace_run(make_config(BASE), names, 1), trace_run(both, names, 1)
+    for n in names:
+        np.testing.assert_array_equal(plain[n], shifted[n], err_msg=n)
+
+
+def test_a_phase_puts_samples_between_the_grid_of_ts() -> None:
+    cfg = make_config(BASE, truth="noise-free", sources=[{"id": "s1", "phase_s": 0.5}])
+    t = cfg.timeline
+    assert t.grid_us == US // 2 and t.indices("s1")[:3].tolist() == [3, 5, 7]
+    fine, coarse = truth(Setup(cfg), 0), truth(Setup(make_config(BASE, truth="noise-free")), 0)
+    # the coordinated turn over two half steps is the same turn over one step
+    np.testing.assert_allclose(fine[::2], coarse, rtol=1e-12, atol=1e-9)
+    np.testing.assert_array_equal(sampled(Setup(cfg), fine, PRIMARY), fine[2::2])
+    # the source's prior is the initial estimate carried over its phase
+    setup = Setup(cfg)
+    x0 = np.asarray(cfg.x0)[:, None]
+    m, P = setup.operator("s1").start("s1", x0)
+    np.testing.assert_allclose(m[:, 0], setup.motion.with_period(0.5).f(x0)[:, 0])
+    assert np.all(np.linalg.eigvalsh(P) > 0) and not np.allclose(P, setup.P0)
+    assert setup.operator(PRIMARY).start(PRIMARY, x0)[0] is x0
+
+
+def test_each_operator_is_scored_at_its_own_samples() -> None:
+    res = run_batch(config(period_s=4.0), ["tl-ukf"], [0, 1])
+    assert res["source-ukf"].K == 5 and res["tl-ukf"].K == 20
+    fast = run_batch(config(period_s=0.25), ["tl-ukf"], [0, 1])
+    assert fast["source-ukf"].K == 80 and fast["tl-ukf"].K == 20
+    # its step at 0.75 s already sends for the primary's first sample: 2 runs x 20 steps, where
+    # the paper's source (and a slower one) sends nothing before the primary's first step
+    assert fast["tl-ukf"].transfer_steps == 2 * 20
+    assert run_batch(make_config(BASE), ["tl-ukf"], [0, 1])["tl-ukf"].transfer_steps == 2 * 19
+    assert res["tl-ukf"].transfer_steps == 2 * 16  # nothing before its first step, at 4 s
+
+
+def test_a_transfer_off_the_sources_steps_is_its_own_at_its_own_period() -> None:
+    """``ahead`` carries the posterior by the unscented transform; over the source's own period
+    a UKF source's own prediction does the same, so the two agree."""
+    cfg = make_config(BASE)
+    setup = Setup(cfg)
+    sims = [simulate(setup, r) for r in (0, 1)]
+    x0 = np.stack([s.x0_hat for s in sims], axis=1)
+    sources = Sources(setup, [("source-ukf", "s1")], x0, [0, 1])
+    for k in range(1, 6):
+        z = setup.sensors["s1"].observe(np.stack([s.z["s1"][k - 1] for s in sims], 1))
+        own = sources.step(k, {"s1": z})["source-ukf", "s1"]
+        carried = sources.ahead(("source-ukf", "s1"), cfg.Ts)
+        np.testing.assert_allclose(carried.mean, own.mean, rtol=1e-10)
+        np.testing.assert_allclose(carried.cov, own.cov, rtol=1e-8)
+        assert carried.origin == "s1"
+
+
+@pytest.mark.parametrize(
+    ("given", "says"),
+    [
+        ({"sources": [{"id": "s1", "period_s": 1 / 3}]}, "share no grid of 1 ms"),
+        ({"sources": [{"id": "s1", "period_s": 0}]}, "sources.0.period_s"),
+        ({"sources": [{"id": "s1", "phase_s": 1.0}]}, "sources.s1.phase_s = 1 s is not in [0"),
+        ({"primary_phase_s": 1.5}, "primary_phase_s = 1.5 s is not in [0, Ts = 1 s)"),
+        ({"sources": [{"id": "s1", "clock_offset_s": -2}]}, "sources.s1.clock_offset_s = -2 s"),
+        ({"primary_clock_offset_s": 0.5, "max_clock_offset_s": 0.1}, "max_clock_offset_s = 0.1"),
+        ({"duration_s": 30, "K": 10}, "give duration_s or K, not both"),
+        ({"duration_s": 0.5}, "holds no primary sample"),
+    ],
+)
+def test_a_bad_clock_is_refused_naming_its_field(given: dict[str, object], says: str) -> None:
+    with pytest.raises(ConfigError, match=re.escape(says)):
+        make_config({"preset": "arasaratnam-haykin", **given})
+
+
+def test_duration_gives_the_primarys_steps() -> None:
+    cfg = make_config({"duration_s": 30.5, "primary_phase_s": 0.5})
+    assert cfg.K == 30 and cfg.timeline.indices(PRIMARY)[-1] == 61  # 30.5 s on a 0.5 s grid
+
+
+def test_fusion_needs_one_clock() -> None:
+    from tltrack.engine.montecarlo import check_filters
+
+    with pytest.raises(ValueError, match="centralized fusion"):
+        check_filters(config(period_s=2.0), ["fusion-pf"])
