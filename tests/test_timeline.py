@@ -48,13 +48,15 @@ def test_a_faster_source_sends_only_from_its_last_step_before_each_primary_sampl
 
 
 def test_a_clock_offset_moves_the_horizon_and_equal_offsets_cancel() -> None:
-    assert config(clock_offset_s=0.25).timeline.targets("s1", 3) == [(4, 3 * US // 4)]
+    bound = {**BASE, "max_clock_offset_s": 0.25}
+    ahead = make_config(bound, sources=[{"id": "s1", "clock_offset_s": 0.25}])
+    assert ahead.timeline.targets("s1", 3) == [(4, 3 * US // 4)]
     both = make_config(
-        BASE, primary_clock_offset_s=0.25, sources=[{"id": "s1", "clock_offset_s": 0.25}]
+        bound, primary_clock_offset_s=0.25, sources=[{"id": "s1", "clock_offset_s": 0.25}]
     )
     assert both.timeline.targets("s1", 3) == [(4, US)]
     names = ["ukf", "tl-ukf", "pf", "tl-pf"]
-    plain, shifted = trace_run(make_config(BASE), names, 1), trace_run(both, names, 1)
+    plain, shifted = trace_run(make_config(bound), names, 1), trace_run(both, names, 1)
     for n in names:
         np.testing.assert_array_equal(plain[n], shifted[n], err_msg=n)
 
@@ -105,6 +107,31 @@ def test_a_transfer_off_the_sources_steps_is_its_own_at_its_own_period() -> None
         assert carried.origin == "s1"
 
 
+def test_a_clock_bound_widens_every_transfer_by_the_state_moving_in_that_time() -> None:
+    """With clocks within b of the truth, the horizon is off by up to 2b; to first order the
+    transfer's covariance grows by (2b)^2 H v v' H', v the carried state's velocity."""
+    cfg = make_config(BASE, max_clock_offset_s=0.2)
+    setup = Setup(cfg)
+    sims = [simulate(setup, r) for r in (0, 1)]
+    x0 = np.stack([s.x0_hat for s in sims], axis=1)
+    sources = Sources(setup, [("source-ukf", "s1")], x0, [0, 1])
+    z = setup.sensors["s1"].observe(np.stack([s.z["s1"][0] for s in sims], 1))
+    sources.step(1, {"s1": z})
+    role = sources.roles["source-ukf", "s1"]
+    sure = role.ahead(setup.motion.with_period, 1.0)
+    unsure = sources.ahead(("source-ukf", "s1"), 1.0)
+    # a wider prior moves E[h(x)] only by the sensor's curvature
+    np.testing.assert_allclose(unsure.mean, sure.mean, rtol=1e-2)
+    grown = unsure.cov - sure.cov
+    assert np.all(np.linalg.eigvalsh(grown) > -1e-9)  # it only ever widens
+    assert np.all(np.einsum("bii->b", grown) > 0)
+    assert sources.clock_spread_s == pytest.approx(0.4)
+    # each run's growth in range is (sigma_t times the range rate)^2, to first order
+    x = role.filter.m  # the UKF source's own prediction over its period: the carried mean
+    r_dot = np.einsum("ib,ib->b", x[[0, 2]], x[[1, 3]]) / np.hypot(x[0], x[2])
+    np.testing.assert_allclose(grown[:, 0, 0], (sources.clock_spread_s * r_dot) ** 2, rtol=0.05)
+
+
 @pytest.mark.parametrize(
     ("given", "says"),
     [
@@ -113,6 +140,7 @@ def test_a_transfer_off_the_sources_steps_is_its_own_at_its_own_period() -> None
         ({"sources": [{"id": "s1", "phase_s": 1.0}]}, "sources.s1.phase_s = 1 s is not in [0"),
         ({"primary_phase_s": 1.5}, "primary_phase_s = 1.5 s is not in [0, Ts = 1 s)"),
         ({"sources": [{"id": "s1", "clock_offset_s": -2}]}, "sources.s1.clock_offset_s = -2 s"),
+        ({"sources": [{"id": "s1", "clock_offset_s": 0.1}]}, "max_clock_offset_s = 0 s"),
         ({"primary_clock_offset_s": 0.5, "max_clock_offset_s": 0.1}, "max_clock_offset_s = 0.1"),
         ({"duration_s": 30, "K": 10}, "give duration_s or K, not both"),
         ({"duration_s": 0.5}, "holds no primary sample"),

@@ -99,7 +99,7 @@ def study(
         "realizations": realizations,
         "manoeuvres": studies.MANOEUVRE_CONFIGS,
         "clutter": studies.CLUTTER_SWEEPS,
-        "links": len(studies.link_cells(1.0)),
+        "links": len(studies.link_cells()),
     }
     total = runs * configurations.get(name, 1)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:

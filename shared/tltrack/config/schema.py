@@ -356,10 +356,11 @@ class Config(BaseModel):
         json_schema_extra=unit("s"),
     )
     max_clock_offset_s: float = Field(
-        1.0,
+        0.0,
         ge=0,
         allow_inf_nan=False,
-        description="the largest clock offset an operator may have",
+        description="every operator's clock is within this of the truth; a transfer's time is "
+        "as uncertain (0: the paper's shared clock)",
         json_schema_extra=unit("s"),
     )
     x0: list[float] = Field(

@@ -237,11 +237,22 @@ class Sources:
             )
         return out
 
+    @property
+    def clock_spread_s(self) -> float:
+        """The spread a source gives its horizon to the primary's sample, from the clock bound b:
+        each clock within +-b of the truth, so the two differ by some constant tau, |tau| <= 2b.
+        A constant error is a bias, not noise: only a spread of 2b makes the transfer's added
+        covariance (2b)^2 v v' cover tau^2 v v' whatever tau is (sqrt(2/3) b, the variance of
+        two independent uniform clocks, left TL worse than the isolated filter: papers/links).
+        0 on the paper's shared clock."""
+        return 2.0 * self.setup.cfg.max_clock_offset_s
+
     def ahead(self, link: Link, horizon_s: float) -> Observation:
         """Source filter ``link``'s transfer for ``horizon_s`` after its last step, off its own
-        steps (:meth:`~tltrack.filters.transfer.Source.ahead`)."""
-        motion = self.setup.motion.with_period(horizon_s)
-        return replace(self.roles[link].ahead(motion), origin=link[1])
+        steps or with uncertain clocks (:meth:`~tltrack.filters.transfer.Source.ahead`)."""
+        role = self.roles[link]
+        sent = role.ahead(self.setup.motion.with_period, horizon_s, self.clock_spread_s)
+        return replace(sent, origin=link[1])
 
     def recovered(self, link: Link) -> bool:
         """Did the last step reinitialise this source filter in any run?"""
@@ -418,7 +429,8 @@ class Driver:
             period = self.timeline.clocks[sid].period_us
             for link, transfer in self.sources.step(k, z[0], only=links).items():
                 for j, horizon in self.timeline.targets(sid, k):
-                    own = horizon == period  # the paper's transfer: the filter's own prediction
+                    # the paper's transfer: the filter's own prediction, over its own period
+                    own = horizon == period and not self.sources.clock_spread_s
                     sent = transfer if own else self.sources.ahead(link, horizon / US)
                     self.channel.send(link, j, sent)
         if PRIMARY not in now:

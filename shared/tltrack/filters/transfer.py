@@ -33,6 +33,9 @@ from tltrack.models.base import MeasurementModel, MotionModel
 from tltrack.models.observation import Observation
 from tltrack.models.scan import Scan, Statement
 
+#: the time step of the central difference that gives a carried state's rate of change
+RATE_STEP_S = 1e-3
+
 #: Reinitialises the lost runs of a filter around a measurement; returns which runs it did (see
 #: tltrack.filters.recovery).
 Recover = Callable[[Any, Observation], NDArray[np.bool_]]
@@ -70,17 +73,30 @@ class Source:
         self._upcoming = self.filter.predicted_observation(self.sensor, self.R)
         return est, self._upcoming
 
-    def ahead(self, motion: MotionModel) -> Observation:
-        """The transfer for a time off the source's own steps, ``motion``'s period after its last
-        one (operators with their own periods, :mod:`tltrack.config.timeline`): the last
-        posterior N(x_hat, P) carried over it and through the sensor by the unscented transform
-        (eq. BTL_sr_eta_1 with a Gaussian for the posterior). It draws no random number, so the
-        filter's own steps are those of its isolated twin still."""
+    def ahead(
+        self, over: Callable[[float], MotionModel], horizon_s: float, spread_s: float = 0.0
+    ) -> Observation:
+        """The transfer for a time off the source's own steps, ``horizon_s`` after its last one
+        (operators with their own periods, :mod:`tltrack.config.timeline`): the last posterior
+        N(x_hat, P) carried over it (``over(dt)``: the motion model over dt) and through the
+        sensor by the unscented transform (eq. BTL_sr_eta_1 with a Gaussian for the posterior).
+
+        ``spread_s``: the standard deviation of the horizon's true length (the two operators'
+        clocks). To first order in that error the carried state moves by it times its rate of
+        change v, which adds spread_s^2 v v' to its covariance: a transfer whose time is
+        uncertain says so. No random number is drawn, so the filter's own steps stay those of
+        its isolated twin.
+        """
         if self._posterior is None:
             raise RuntimeError("a source sends transfers after its first step")
         m = self._posterior.mean.T
-        carried = SigmaPointFilter(motion, unscented(len(m), UKF_KAPPA), m, self._posterior.cov)
+        carried = SigmaPointFilter(over(horizon_s), unscented(len(m), UKF_KAPPA), m,
+                                   self._posterior.cov)  # fmt: skip
         carried.predict()
+        if spread_s > 0:
+            d = min(RATE_STEP_S, horizon_s / 2)
+            v = (over(horizon_s + d).f(m) - over(horizon_s - d).f(m)) / (2 * d)
+            carried.P += spread_s**2 * np.einsum("ib,jb->bij", v, v)
         return carried.predicted_observation(self.sensor, self.R)
 
 

@@ -9,7 +9,7 @@
 - :mod:`~.realizations`: the paper's trajectory as a measured distribution;
 - :mod:`~.manoeuvres`: one motion model against a target class's modes, on manoeuvring targets;
 - :mod:`~.clutter`: the lost share against the false alarms in the gate, at several pd;
-- :mod:`~.links`: RMSE and lost share over a lossy, late link between vehicles.
+- :mod:`~.links`: RMSE and lost share on vehicles: lossy, late links, own rates and clocks.
 
 :mod:`~.common` holds what they share: a :class:`~.common.Setting` (runs, seed, filter kind,
 base configuration), a :class:`~.common.Runner` (how the engine runs) and paired differences.
@@ -21,7 +21,7 @@ from tltrack.studies.clutter import clutter
 from tltrack.studies.common import Runner, Setting
 from tltrack.studies.heterogeneous import heterogeneous
 from tltrack.studies.intensities import intensities
-from tltrack.studies.links import cells as link_cells
+from tltrack.studies.links import cell_names as link_cells
 from tltrack.studies.links import links
 from tltrack.studies.manoeuvres import CONFIGS as MANOEUVRE_CONFIGS
 from tltrack.studies.manoeuvres import manoeuvres
