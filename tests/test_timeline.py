@@ -4,15 +4,21 @@ the transfers' horizons, and the engine stepping them."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 from tltrack.config import Config, ConfigError, make_config
 from tltrack.config.timeline import US
 from tltrack.engine.driver import Sources
 from tltrack.engine.montecarlo import run_batch, trace_run
+from tltrack.engine.results import assemble
+from tltrack.engine.scan_file import ScanFile
 from tltrack.engine.scenario import sampled, simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.engine.track import ScansDoNotFitError, track
+from tltrack.wire.messages import EpisodeStart
 
 pytestmark = pytest.mark.unit
 
@@ -161,3 +167,19 @@ def test_fusion_needs_one_clock() -> None:
 
     with pytest.raises(ValueError, match="centralized fusion"):
         check_filters(config(period_s=2.0), ["fusion-pf"])
+
+
+def test_where_one_clock_is_assumed_another_is_refused_with_the_reason(tmp_path: Path) -> None:
+    """A live episode, a scan file's steps and the PCRLB assume one clock: each refuses, or
+    leaves out, operators with their own, and says so."""
+    cfg = config(period_s=2.0)
+    start = {"episode": "e", "sender": "sensor_sim", "t_sensor": 1.0, "k": 0, "run": 0, "K": 20}
+    with pytest.raises(ValidationError, match="a live episode steps every operator on one clock"):
+        EpisodeStart(**start, config=cfg.model_dump(mode="json"), steps_per_sec=0)
+    EpisodeStart(**start, config=make_config(BASE).model_dump(mode="json"), steps_per_sec=0)
+    scans = ScanFile(tmp_path / "scans.csv", 20, {}, {}, [], {})
+    with pytest.raises(ScansDoNotFitError, match="on one clock"):
+        track(cfg, ["ukf"], scans)
+    doc = assemble(cfg, {})
+    assert doc["pcrlb"] == {} and "no PCRLB" in doc["pcrlb_note"]
+    assert len(assemble(make_config(BASE), {})["pcrlb"]["primary"]) == 20

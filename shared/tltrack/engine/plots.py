@@ -34,16 +34,27 @@ def _style(name: str) -> dict[str, Any]:
     return {"color": _STYLE.get(kind, "black"), "linestyle": ls, "marker": marker, "markevery": 8}
 
 
+def _sample_times(cfg: Mapping[str, Any], name: str, n: int) -> Any:
+    """When a filter's n estimates are, from a results document's config: its operator's samples
+    (a source's own period and phase; the primary's otherwise)."""
+    period, phase = cfg["Ts"], cfg.get("primary_phase_s", 0.0)
+    if name.startswith("source-"):
+        sid = name.split("/", 1)[1] if "/" in name else cfg["sources"][0]["id"]
+        own = next(s for s in cfg["sources"] if s["id"] == sid)
+        period, phase = own.get("period_s") or period, own.get("phase_s", 0.0)
+    return phase + period * np.arange(1, n + 1)
+
+
 def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
     """RMSE(k) of every filter, with the PCRLB as the physical limit (cf. the paper's Fig. 3/5)."""
     fig, ax = plt.subplots(figsize=(8, 4.5))
+    cfg = doc["config"]
     for name, r in doc["filters"].items():
-        k = np.arange(1, len(r["rmse_per_step"]) + 1)
-        ax.plot(k, r["rmse_per_step"], label=f"{name} ({r['rmse_overall']:.2f} m)", **_style(name))
+        t = _sample_times(cfg, name, len(r["rmse_per_step"]))
+        ax.plot(t, r["rmse_per_step"], label=f"{name} ({r['rmse_overall']:.2f} m)", **_style(name))
     for label, bound in doc.get("pcrlb", {}).items():
-        k = np.arange(1, len(bound) + 1)
         ax.plot(
-            k,
+            cfg["Ts"] * np.arange(1, len(bound) + 1),
             bound,
             color="grey",
             lw=1,
@@ -51,7 +62,7 @@ def rmse_vs_time(doc: Mapping[str, Any], path: Path, title: str = "") -> Path:
             label=f"PCRLB, {label.replace('_', ' ')}"
             + (" (single model)" if "pcrlb_note" in doc else ""),
         )
-    ax.set_xlabel("time step k [s]")
+    ax.set_xlabel("time [s]")
     ax.set_ylabel("position RMSE [m]")
     ax.set_title(title or _describe(doc))
     ax.grid(alpha=0.3)

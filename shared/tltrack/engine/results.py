@@ -51,8 +51,18 @@ PCRLB_MODES_NOTE = (
 )
 
 
+#: why there is no bound when the operators keep their own clocks
+PCRLB_CLOCKS_NOTE = (
+    "no PCRLB: its recursion steps every sensor on one period (tltrack.engine.pcrlb), and the "
+    "operators here keep their own periods, phases or clocks"
+)
+
+
 def position_bounds(cfg: Config) -> dict[str, list[float]]:
-    """PCRLB of the primary alone, and with every source's raw data, averaged over the truths."""
+    """PCRLB of the primary alone, and with every source's raw data, averaged over the truths;
+    none when the operators keep their own clocks (:data:`PCRLB_CLOCKS_NOTE`)."""
+    if not cfg.timeline.synchronous:
+        return {}
     setup = Setup(cfg)
     runs = 1 if cfg.truth != "random" else cfg.runs
     truths = np.stack([truth(setup, r) for r in range(runs)])
@@ -77,6 +87,8 @@ def assemble(cfg: Config, results: dict[str, FilterResult]) -> dict[str, Any]:
         doc["truth"] = truth_file_record(cfg)
     if cfg.motion_modes is not None:
         doc["pcrlb_note"] = PCRLB_MODES_NOTE
+    if not cfg.timeline.synchronous:
+        doc["pcrlb_note"] = PCRLB_CLOCKS_NOTE
     return doc
 
 

@@ -66,7 +66,15 @@ class TrackResult:
 
 def check_fit(setup: Setup, scans: ScanFile) -> None:
     """A sensor the config says detects every step with no false alarm (pd 1, no clutter) takes
-    exactly one detection per step: refuse a file that has none or several, naming the step."""
+    exactly one detection per step: refuse a file that has none or several, naming the step.
+    A scan file's steps are the paper's, on one clock: refuse a config whose operators keep
+    their own (:mod:`tltrack.config.timeline`)."""
+    if not setup.cfg.timeline.synchronous:
+        raise ScansDoNotFitError(
+            f"{scans.path}: a scan file's step k is every sensor's, on one clock; the config "
+            "gives an operator its own period_s, phase_s or clock_offset_s (the engine runs "
+            "those: tltrack experiment)"
+        )
     for sid in scans.detections:
         if not setup.sensors[sid].detection.trivial:
             continue

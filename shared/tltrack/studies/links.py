@@ -172,7 +172,8 @@ def _draw(res: dict[str, Results], names: list[str], out: Path) -> None:
     for cells_, x, label, file in (
         (loss, [100 * p for p in LOSSES], "transfers lost [%]", "links_loss.png"),
         (delay, DELAYS, "link delay [primary periods], jitter T/2", "links_delay.png"),
-        (rates, np.log2(RATES), "log2(source's rate / primary's rate)", "links_rates.png"),
+        (rates, [float(x) for x in np.log2(RATES)], "log2(source's rate / primary's)",
+         "links_rates.png"),
         (offsets, OFFSETS, f"clock offset [primary periods], bound {CLOCK_BOUND:g} T",
          "links_clocks.png"),
     ):  # fmt: skip

@@ -352,6 +352,14 @@ class EstimateMsg(Message):
         return self
 
 
+#: why a live episode refuses operators with their own periods, phases or clocks
+ONE_CLOCK = (
+    "a live episode steps every operator on one clock: no sources[].period_s, phase_s or "
+    "clock_offset_s, no primary_phase_s or primary_clock_offset_s (the engine runs those: "
+    "tltrack experiment, tltrack study links)"
+)
+
+
 class EpisodeStart(Message):
     """sensor_sim announces an episode: its config (a :class:`tltrack.config.Config` dump),
     run index, number of steps and pace. ``k`` is 0.
@@ -380,6 +388,8 @@ class EpisodeStart(Message):
             detail = {"detail": describe_validation_error(err)}
             reason = "unknown_kind" if unknown else "invalid"
             raise PydanticCustomError(reason, "config: {detail}", detail) from None
+        if not cfg.timeline.synchronous:
+            raise PydanticCustomError("invalid", "config: {detail}", {"detail": ONE_CLOCK})
         return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
 
     def parsed_config(self) -> Any:
