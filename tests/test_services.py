@@ -112,6 +112,49 @@ def test_lockstep_episode_equals_the_offline_engine(tmp_path, robust, clutter):
         assert stages["to_tracker"] > 0 and stages["step"] > 0 and stages["to_receiver"] > 0
 
 
+#: a source sampling 4 times slower than the primary, its clock a quarter period ahead
+VEHICLES = {
+    "max_clock_offset_s": 0.25,
+    "sources": [{"id": "s1", "period_s": 4.0, "clock_offset_s": 0.25}],
+}
+
+
+def test_a_lockstep_episode_on_their_own_clocks_equals_the_offline_engine(tmp_path):
+    """Each operator samples at its own rate and stamps with its own clock: the source steps at
+    4, 8, ... s and sends, after each step, a transfer for each of the primary's next four
+    samples (t_apply on the primary's schedule); the live estimates are the engine's."""
+    db = tmp_path / "scorer.sqlite"
+    K, N = 30, 500
+    given = tmp_path / "vehicles.json"
+    given.write_text(json.dumps(VEHICLES))
+    cfg = make_config(
+        preset="arasaratnam-haykin", truth="fixed", seed=7, K=K, particles=N, recovery=True,
+        **VEHICLES,
+    )  # fmt: skip
+    steps = cfg.timeline.steps("s1")
+    assert steps == K // 4
+    with stack(tmp_path) as s:
+        sim = [*sim_flags(K, N, pace=0), f"--config={given}"]
+        start_all(s, db, primary_env={"TLTRACK_PRIMARY_LOCKSTEP": "true"}, sim=sim)
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        summary = supervisor.wait_for_scored(s.endpoint, 1, 120)
+        assert summary is not None, logs(s)
+    offline = trace_run(cfg, ["tl-rpf", "rpf", "source-rpf"], run=0)
+    live = estimates(db)
+    for name, n in (("tl-rpf", K), ("rpf", K), ("source-rpf", steps)):
+        assert sorted(live[name]) == list(range(1, n + 1)), name
+        x = np.array([live[name][k][0] for k in range(1, n + 1)])
+        np.testing.assert_allclose(x, offline[name], rtol=0, atol=1e-9, err_msg=name)
+    # nothing before the source's first step at 4 s; then every step has its transfer
+    assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] * 4 + [True] * (K - 4)
+    # the scorer scored each at its own samples: the source's 7 against the truth at 4, 8, ...
+    assert summary["filters"]["source-rpf"]["steps"] == steps
+    assert summary["filters"]["source-rpf"]["gaps"] == 0
+    x = simulate(Setup(cfg), 0).truth[cfg.timeline.indices("s1")]
+    err = np.hypot(*(offline["source-rpf"] - x)[:, [0, 2]].T)
+    assert summary["filters"]["source-rpf"]["rmse_overall"] == pytest.approx(err.mean(), rel=1e-9)
+
+
 @pytest.mark.xdist_group("live")  # "isolated within 3 steps" at 20 steps a second
 def test_killing_the_source_leaves_the_primary_going_isolated(tmp_path):
     db = tmp_path / "scorer.sqlite"

@@ -4,11 +4,12 @@ the transfers' horizons, and the engine stepping them."""
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from pydantic import ValidationError
+from doubles import Offline, received
 from tltrack.config import Config, ConfigError, make_config
 from tltrack.config.timeline import US
 from tltrack.engine.driver import Sources
@@ -18,7 +19,10 @@ from tltrack.engine.scan_file import ScanFile
 from tltrack.engine.scenario import sampled, simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.track import ScansDoNotFitError, track
-from tltrack.wire.messages import EpisodeStart
+from tltrack.live.tracking import SourceEpisode
+from tltrack.services.primary_tracker import tracker as primary_svc
+from tltrack.wire import keys
+from tltrack.wire.messages import EpisodeStart, Measurement, encode
 
 pytestmark = pytest.mark.unit
 
@@ -170,16 +174,49 @@ def test_fusion_needs_one_clock() -> None:
 
 
 def test_where_one_clock_is_assumed_another_is_refused_with_the_reason(tmp_path: Path) -> None:
-    """A live episode, a scan file's steps and the PCRLB assume one clock: each refuses, or
-    leaves out, operators with their own, and says so."""
+    """A scan file's steps and the PCRLB assume one clock: each refuses, or leaves out,
+    operators with their own, and says so."""
     cfg = config(period_s=2.0)
-    start = {"episode": "e", "sender": "sensor_sim", "t_sensor": 1.0, "k": 0, "run": 0, "K": 20}
-    with pytest.raises(ValidationError, match="a live episode steps every operator on one clock"):
-        EpisodeStart(**start, config=cfg.model_dump(mode="json"), steps_per_sec=0)
-    EpisodeStart(**start, config=make_config(BASE).model_dump(mode="json"), steps_per_sec=0)
     scans = ScanFile(tmp_path / "scans.csv", 20, {}, {}, [], {})
     with pytest.raises(ScansDoNotFitError, match="on one clock"):
         track(cfg, ["ukf"], scans)
     doc = assemble(cfg, {})
     assert doc["pcrlb"] == {} and "no PCRLB" in doc["pcrlb_note"]
     assert len(assemble(make_config(BASE), {})["pcrlb"]["primary"]) == 20
+
+
+def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
+    """Live, a transfer names the primary's sample (k_apply) and its time on the primary's
+    schedule (t_apply): one for another time, or none at all off the shared clock, or one made
+    later than now beyond the clocks' bound, is refused and counted, never kept for a step."""
+    svc = Offline("primary_tracker")
+    tracker = primary_svc.PrimaryTracker(primary_svc.Settings.model_validate({}), svc)
+    cfg = make_config(
+        BASE,
+        max_clock_offset_s=0.25,
+        sources=[{"id": "s1", "period_s": 4.0, "clock_offset_s": 0.25}],
+    )
+    start = EpisodeStart(
+        episode="e", sender="sensor_sim", k=0, t_sensor=time.time(), run=0,
+        config=cfg.model_dump(mode="json"), K=cfg.K, steps_per_sec=0.0,
+    )  # fmt: skip
+    tracker.handle(received(keys.episode("e"), encode(start)))
+    src = SourceEpisode(cfg, 0, "ukf", "s1")
+    z = Measurement(episode="e", sender="s", k=1, t_sensor=0.0, sensor="s1",
+                    z=[simulate(Setup(cfg), 0).z["s1"][0]])  # fmt: skip
+    (j, t_apply, eta), *_ = src.sends(src.step(z)[1])
+    assert (j, t_apply) == (5, 5.0)
+
+    def offer(t_apply: float | None, t_sensor: float | None = None) -> None:
+        k = 1 if t_apply is not None else j - 1  # unstamped: as on the shared clock
+        msg = src.transfer_message(eta, "e", k, time.time() if t_sensor is None else t_sensor,
+                                   j, t_apply)  # fmt: skip
+        tracker.handle(received(keys.transfer("s1", "e"), encode(msg)))
+
+    offer(5.0 + 0.002)  # 2 ms off, beyond the 1 ms tolerance
+    offer(None)  # off the shared clock a transfer must say its time
+    offer(5.0, t_sensor=time.time() + 2.0)  # made 2 s from now: beyond twice the 0.25 s bound
+    assert svc.rejects.by_reason() == {"wrong_time": 2, "from_the_future": 1}
+    assert tracker.episodes.get("e").transfers == {}  # type: ignore[union-attr]
+    offer(5.0 + 0.0005)
+    assert set(tracker.episodes.get("e").transfers[5]) == {"s1"}  # type: ignore[union-attr]

@@ -125,6 +125,28 @@ class Timeline:
         """Who samples at grid tick n, and which of its samples that is."""
         return self._at.get(n, {})
 
+    def tick(self, sid: str, k: int) -> int:
+        """The grid tick of operator ``sid``'s sample k; past its last, the ticks after the end
+        (an episode's end names its last tick)."""
+        c, steps = self.clocks[sid], self.steps(sid)
+        if k <= steps:
+            return c.sample(k) // self.grid_us
+        return self.ticks + k - steps
+
+    def stamp(self, sid: str, j: int) -> int:
+        """What operator ``sid``'s clock reads at its sample j (us): its schedule, public."""
+        return self.clocks[sid].stamp(j)
+
+    def expects(self, sid: str, j: int) -> bool:
+        """Does some step of source ``sid`` send a transfer for the primary's sample j? Not
+        before its first step's first target (the paper's primary steps alone at k = 1)."""
+        k = 1
+        while not (first := self.targets(sid, k)):
+            k += 1
+            if k > self.steps(sid):
+                return False
+        return first[0][0] <= j
+
     def targets(self, sid: str, k: int) -> list[tuple[int, int]]:
         """The primary's samples j that source ``sid``'s step k sends transfers for, each with
         the horizon (us) the source predicts over: the primary's stamp minus its own."""

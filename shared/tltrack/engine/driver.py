@@ -193,6 +193,14 @@ def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
     return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
 
 
+def operator_of(name: str, source_ids: Sequence[str]) -> str:
+    """Whose filter a reported name is (:func:`reported_name`'s inverse): a source's id, or the
+    primary's."""
+    if not name.startswith("source-"):
+        return PRIMARY
+    return name.split("/", 1)[1] if "/" in name else source_ids[0]
+
+
 class Sources:
     """Algorithm 1 for each (source filter, source id) of ``links``: a source operator's half."""
 
@@ -246,6 +254,21 @@ class Sources:
         two independent uniform clocks, left TL worse than the isolated filter: papers/links).
         0 on the paper's shared clock."""
         return 2.0 * self.setup.cfg.max_clock_offset_s
+
+    def sends(
+        self, link: Link, k: int, transfer: Observation
+    ) -> list[tuple[int, int, Observation]]:
+        """What source filter ``link``'s step k sends, its own transfer for k + 1 in hand: for
+        each primary sample j until its next step (:meth:`Timeline.targets
+        <tltrack.config.timeline.Timeline.targets>`), (j, the horizon in us, the transfer). Over
+        its own period on a shared clock that is its own (the paper's); else :meth:`ahead`."""
+        timeline = self.setup.cfg.timeline
+        period = timeline.clocks[link[1]].period_us
+        out = []
+        for j, horizon in timeline.targets(link[1], k):
+            own = horizon == period and not self.clock_spread_s
+            out.append((j, horizon, transfer if own else self.ahead(link, horizon / US)))
+        return out
 
     def ahead(self, link: Link, horizon_s: float) -> Observation:
         """Source filter ``link``'s transfer for ``horizon_s`` after its last step, off its own
@@ -426,12 +449,8 @@ class Driver:
             if sid == PRIMARY:
                 continue
             links = [link for link in self.sources.roles if link[1] == sid]
-            period = self.timeline.clocks[sid].period_us
             for link, transfer in self.sources.step(k, z[0], only=links).items():
-                for j, horizon in self.timeline.targets(sid, k):
-                    # the paper's transfer: the filter's own prediction, over its own period
-                    own = horizon == period and not self.sources.clock_spread_s
-                    sent = transfer if own else self.sources.ahead(link, horizon / US)
+                for j, _horizon, sent in self.sources.sends(link, k, transfer):
                     self.channel.send(link, j, sent)
         if PRIMARY not in now:
             return

@@ -30,13 +30,14 @@ from tltrack.engine.driver import (
     Driver,
     Lossy,
     StepRecord,
+    operator_of,
     primary_specs,
     source_links,
 )
 from tltrack.engine.faults import transfer_lag
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import Run, simulate
-from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.engine.setup import Setup
 from tltrack.filters import consistency
 from tltrack.filters.base import Estimate, Filter
 from tltrack.filters.decision import position_fix
@@ -334,10 +335,7 @@ def own_n_z(setup: Setup) -> Callable[[str], int]:
     """The components of the own measurement of a filter, by its reported name."""
 
     def n_z(name: str) -> int:
-        if not name.startswith("source-"):
-            return setup.sensor(PRIMARY).n_z
-        sid = name.split("/", 1)[1] if "/" in name else setup.source_ids[0]
-        return setup.sensor(sid).n_z
+        return setup.sensor(operator_of(name, setup.source_ids)).n_z
 
     return n_z
 

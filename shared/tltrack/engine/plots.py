@@ -17,6 +17,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.config import PRIMARY
+from tltrack.engine.driver import operator_of
+
 _STYLE = {
     "pf": "tab:blue",
     "rpf": "tab:purple",
@@ -38,8 +41,8 @@ def _sample_times(cfg: Mapping[str, Any], name: str, n: int) -> Any:
     """When a filter's n estimates are, from a results document's config: its operator's samples
     (a source's own period and phase; the primary's otherwise)."""
     period, phase = cfg["Ts"], cfg.get("primary_phase_s", 0.0)
-    if name.startswith("source-"):
-        sid = name.split("/", 1)[1] if "/" in name else cfg["sources"][0]["id"]
+    sid = operator_of(name, [s["id"] for s in cfg["sources"]])
+    if sid != PRIMARY:
         own = next(s for s in cfg["sources"] if s["id"] == sid)
         period, phase = own.get("period_s") or period, own.get("phase_s", 0.0)
     return phase + period * np.arange(1, n + 1)

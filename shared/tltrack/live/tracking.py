@@ -18,6 +18,7 @@ from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 from tltrack.config import Config
+from tltrack.config.timeline import US
 from tltrack.engine.driver import Link, Primaries, Sources, StepRecord, reported_name
 from tltrack.engine.montecarlo import check_filters
 from tltrack.engine.registry import FilterSpec, parse
@@ -189,15 +190,35 @@ class SourceEpisode:
         eta = self._half.step(self.k, {self.source_id: statement(self.own, z)})[self._link]
         return self._estimates.pop(self.name), eta
 
-    def transfer_message(self, eta: Observation, episode: str, k: int, t_sensor: float) -> Transfer:
-        """What it sends after step ``k``: (eta_hat, P_eta_eta) for step k + 1, described by its
-        own sensor."""
+    def sends(self, eta: Observation) -> list[tuple[int, float | None, Observation]]:
+        """What the last step sends, its own transfer ``eta`` for k + 1 in hand: for each of the
+        primary's samples until its next step, (k_apply, t_apply, the transfer), as the engine's
+        step driver sends them; t_apply (s, the primary's schedule) None on the paper's clock."""
+        timeline = self.cfg.timeline
+        stamped = not timeline.synchronous
+        return [
+            (j, timeline.stamp(PRIMARY, j) / US if stamped else None, sent)
+            for j, _horizon, sent in self._half.sends(self._link, self.k, eta)
+        ]
+
+    def transfer_message(
+        self,
+        eta: Observation,
+        episode: str,
+        k: int,
+        t_sensor: float,
+        k_apply: int | None = None,
+        t_apply: float | None = None,
+    ) -> Transfer:
+        """What it sends after step ``k``: (eta_hat, P_eta_eta) for the primary's sample
+        ``k_apply`` (default k + 1) at ``t_apply``, described by its own sensor."""
         return Transfer(
             episode=episode,
             sender=self.source_id,
             k=k,
             t_sensor=t_sensor,
-            k_apply=k + 1,
+            k_apply=k + 1 if k_apply is None else k_apply,
+            t_apply=t_apply,
             sensor=self.own.spec,
             eta=eta.mean[:, 0],
             P_eta=wire_covariance(eta.cov[0]),

@@ -289,21 +289,27 @@ class Transfer(Message):
     coordinates of the source's sensor, which ``sensor`` describes (kind, position, noise
     parameters): a primary needs nothing else to use it.
 
-    ``k`` is the source step that produced it, so ``k == k_apply - 1``.
+    ``k`` is the source step that produced it. On the paper's shared clock ``k == k_apply - 1``
+    and ``t_apply`` is absent. Operators with their own periods or clocks
+    (:mod:`tltrack.config.timeline`) stamp it with ``t_apply``: the time of the primary's
+    sample ``k_apply`` on the primary's clock, from the episode's start, as its public schedule
+    gives it; the primary refuses one that does not name its own sample's time.
     """
 
     TYPE: ClassVar[str] = "transfer"
     type: Literal["transfer"] = "transfer"
     k_apply: Annotated[int, Field(ge=1, le=MAX_K)]
+    t_apply: Annotated[float, Field(allow_inf_nan=False)] | None = None
     sensor: Annotated[SensorSpec, BeforeValidator(_sensor_spec)]
     eta: Vector
     P_eta: Matrix
 
     @model_validator(mode="after")
     def _consistent(self) -> Transfer:
-        if self.k != self.k_apply - 1:
+        if self.t_apply is None and self.k != self.k_apply - 1:
             raise PydanticCustomError(
-                "invalid", f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1})"
+                "invalid",
+                f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1}), or give t_apply",
             )
         n_z = self.sensor.n_z
         _check_vector(self.eta, (n_z,), "eta")
@@ -352,14 +358,6 @@ class EstimateMsg(Message):
         return self
 
 
-#: why a live episode refuses operators with their own periods, phases or clocks
-ONE_CLOCK = (
-    "a live episode steps every operator on one clock: no sources[].period_s, phase_s or "
-    "clock_offset_s, no primary_phase_s or primary_clock_offset_s (the engine runs those: "
-    "tltrack experiment, tltrack study links)"
-)
-
-
 class EpisodeStart(Message):
     """sensor_sim announces an episode: its config (a :class:`tltrack.config.Config` dump),
     run index, number of steps and pace. ``k`` is 0.
@@ -388,8 +386,6 @@ class EpisodeStart(Message):
             detail = {"detail": describe_validation_error(err)}
             reason = "unknown_kind" if unknown else "invalid"
             raise PydanticCustomError(reason, "config: {detail}", detail) from None
-        if not cfg.timeline.synchronous:
-            raise PydanticCustomError("invalid", "config: {detail}", {"detail": ONE_CLOCK})
         return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
 
     def parsed_config(self) -> Any:
