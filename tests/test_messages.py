@@ -27,6 +27,7 @@ from tltrack.wire.messages import (
     Message,
     MessageRejected,
     RejectCounter,
+    Schedule,
     Tick,
     Transfer,
     Truth,
@@ -81,6 +82,7 @@ def samples() -> list[Message]:
         EpisodeStart(**COMMON, k=0, run=2, config=cfg.model_dump(), K=cfg.K, steps_per_sec=10.0),
         EpisodeEnd(**COMMON, k=99, steps_sent=100),
         Tick(**COMMON, k=3),
+        Schedule(**COMMON, k=0, period_s=1.0, t0_s=0.25),
     ]
 
 

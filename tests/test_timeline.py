@@ -204,7 +204,12 @@ def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
     src = SourceEpisode(cfg, 0, "ukf", "s1")
     z = Measurement(episode="e", sender="s", k=1, t_sensor=0.0, sensor="s1",
                     z=[simulate(Setup(cfg), 0).z["s1"][0]])  # fmt: skip
-    (j, t_apply, eta), *_ = src.sends(src.step(z)[1])
+    eta = src.step(z)[1]
+    assert src.sends(eta) == [] and not src.addressed  # off the shared clock: the schedule first
+    announced = [m for key, m in svc.published if key == keys.schedule("e")]
+    assert announced and announced[0].period_s == 1.0 and announced[0].t0_s == 0.0
+    src.heard(announced[0])  # type: ignore[arg-type]
+    (j, t_apply, eta), *_ = src.sends(eta)
     assert (j, t_apply) == (5, 5.0)
 
     def offer(t_apply: float | None, t_sensor: float | None = None) -> None:

@@ -88,7 +88,7 @@ def test_the_routers_rules_ship_with_the_package() -> None:
 
 def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
     """The primary's router: router-source-sX may put tltrack/source/sX/transfer/* and its
-    heartbeat, no other key."""
+    heartbeat, no other key; towards them goes the primary's schedule alone."""
     env = access_env("primary", tmp_path)
     cfg = zenoh.Config()
     cfg.insert_json5(
@@ -106,5 +106,10 @@ def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
         }
         own = {f"tltrack/source/{sid}/transfer/*", f"tltrack/source/{sid}/heartbeat"}
         assert puts == own, (sid, puts)
-    grouped = [p for p in acl["policies"] if "source-routers" in p["subjects"]]
-    assert all(rules[r]["permission"] == "deny" for p in grouped for r in p["rules"])
+    grouped = [rules[r] for p in acl["policies"] if "source-routers" in p["subjects"]
+               for r in p["rules"]]  # fmt: skip
+    allowed = [r for r in grouped if r["permission"] == "allow"]
+    # towards the sources' routers only the primary's schedule (when it samples, none of its data)
+    assert [(r["flows"], r["messages"], r["key_exprs"]) for r in allowed] == [
+        (["egress"], ["put"], ["tltrack/schedule/*"])
+    ]

@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack.config import Config, FilterKindName
+from tltrack.config import PRIMARY, Config, FilterKindName
+from tltrack.config.timeline import US
 from tltrack.filters.decision import NotComparableError
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
@@ -28,7 +29,7 @@ from tltrack.live.heartbeat import LinkWatch
 from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.tracking import PrimaryEpisode, StepQueue, StepReport, TrackedEpisodes
 from tltrack.wire import admission, keys
-from tltrack.wire.messages import EpisodeStart, Measurement, Transfer
+from tltrack.wire.messages import EpisodeStart, Measurement, Schedule, Transfer
 from tltrack.wire.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("primary_tracker")
@@ -46,6 +47,9 @@ class Settings(BaseSettings):
     filter: FilterKindName = Field("rpf", description="filter kind")
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
     deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
+    transfer_tolerance_ms: float = Field(
+        1.0, ge=0, description="a transfer's t_apply may differ this much from its sample's time"
+    )
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
     heartbeat_s: float = Field(
         0.1, gt=0, le=10, description="the sources' heartbeat period: two missed mean a cut link"
@@ -157,7 +161,18 @@ class PrimaryTracker:
             self.svc.count("episodes_refused")
             return None
         log.info("episode %s (run %d): %s and %s", start.episode, start.run, *tracker.names)
+        self._announce(start.episode, cfg)
         return Episode(start, tracker, [s.id for s in cfg.sources])
+
+    def _announce(self, e: str, cfg: Config) -> None:
+        """Publish this primary's schedule for its sources, off the paper's shared clock (on
+        it, each transfer is simply for k + 1). Again at each step, for a source that joins
+        late."""
+        if not cfg.timeline.synchronous:
+            t0 = cfg.timeline.stamp(PRIMARY, 0) / US
+            msg = Schedule(episode=e, sender=keys.PRIMARY, k=0, t_sensor=time.time(),
+                           period_s=cfg.Ts, t0_s=t0)  # fmt: skip
+            self.svc.publish(keys.schedule(e), msg)
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
         """Keep a transfer of source ``sid`` (its sender, :meth:`handle` checked) for its step."""
@@ -168,6 +183,13 @@ class PrimaryTracker:
         if t.k_apply < ep.steps.next_k:
             self.svc.rejects.add(key, "late_transfer")
             return
+        if not self._on_time(ep, t):
+            self.svc.rejects.add(key, "wrong_time")
+            return
+        ahead = t.t_sensor - time.time()  # made later than now: a clock beyond its bound
+        if ahead > ep.tracker.cfg.max_clock_offset_s * 2 + self.s.transfer_tolerance_ms / 1e3:
+            self.svc.rejects.add(key, "from_the_future")
+            return
         if t.k_apply >= ep.steps.next_k + ep.steps.window:
             self.svc.rejects.add(key, "too_far")
             return
@@ -176,6 +198,18 @@ class PrimaryTracker:
             self.svc.rejects.add(key, "duplicate")
             return
         slot[sid] = t
+
+    def _on_time(self, ep: Episode, t: Transfer) -> bool:
+        """Is a transfer for the time of the sample it names, on this primary's schedule? On
+        the paper's shared clock it may leave ``t_apply`` out; otherwise it must give it within
+        ``transfer_tolerance_ms``: never applied to another time. (One stamped, by its maker's
+        clock, later than now by more than two clock bounds is refused too: ``from_the_future``.)
+        """
+        timeline = ep.tracker.cfg.timeline
+        if t.t_apply is None:
+            return timeline.synchronous
+        own = timeline.stamp(PRIMARY, t.k_apply) / US
+        return abs(t.t_apply - own) <= self.s.transfer_tolerance_ms / 1e3
 
     # ---- stepping -------------------------------------------------------------------------
 
@@ -196,16 +230,20 @@ class PrimaryTracker:
                 now = time.monotonic()
                 if ep.ready_since is None:
                     ep.ready_since = now
-                have = ep.transfers.get(z.k, {}) if z.k > 1 else {}
+                timeline = ep.tracker.cfg.timeline
+                # the paper's source sends nothing for k = 1; others by their schedule
+                have = ep.transfers.get(z.k, {}) if z.k > 1 or not timeline.synchronous else {}
                 waiting = [
-                    sid for sid in ep.sources if sid not in have and self._worth_waiting(sid)
+                    sid
+                    for sid in ep.sources
+                    if sid not in have and timeline.expects(sid, z.k) and self._worth_waiting(sid)
                 ]
-                if waiting and z.k > 1 and not self.s.lockstep:
+                if waiting and not self.s.lockstep:
                     left = ep.ready_since + self.s.deadline_ms / 1e3 - now
                     if left > 0:
                         wait = _sooner(wait, left)
                         break
-                elif waiting and z.k > 1:
+                elif waiting:
                     break  # lock-step: wait as long as the source lives
                 ep.steps.release()
                 ep.transfers.pop(z.k, None)
@@ -214,7 +252,7 @@ class PrimaryTracker:
             if (due := self._step_twins(e, ep)) is not None:
                 wait = _sooner(wait, due)
             else:
-                self.episodes.retire(e, ep.steps.next_k)
+                self.episodes.retire(e, ep.tracker.cfg.timeline.tick(PRIMARY, ep.steps.next_k))
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:
@@ -242,6 +280,7 @@ class PrimaryTracker:
             tracker.monitor.last.get(tracker.tl_name),
         ).publish(self.svc, keys.primary_estimate("tl", e))
         self._twin_later(e, ep, z)
+        self._announce(e, tracker.cfg)
         self.svc.count("steps")
         if not z.z:
             self.svc.count("empty_scans")

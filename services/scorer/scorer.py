@@ -23,6 +23,7 @@ from pathlib import Path
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
+from tltrack.config import PRIMARY
 from tltrack.live.held import Held
 from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.summary import print_summary
@@ -53,6 +54,8 @@ class Scorer:
     def __init__(self, settings: Settings, svc: Service, store: Store) -> None:
         self.s, self.svc, self.store = settings, svc, store
         self.K: dict[str, int] = dict(store.rows("SELECT episode, K FROM episodes"))
+        #: per episode and filter: the steps it takes (its operator's, at its own rate)
+        self.need: dict[str, dict[str, int]] = defaultdict(dict)
         self.expected: dict[str, int] = {}  # filters per episode: one per source, TL, isolated
         self.ended: dict[str, float] = {}  # episode -> monotonic time of its end
         self.last_seen: dict[str, float] = {}
@@ -111,6 +114,7 @@ class Scorer:
                 and self._stored(item.key, self.store.estimate(est, item.t_recv))
             ):
                 self.counts[est.episode][est.filter] += 1
+                self.need[est.episode][est.filter] = self._last_step(info, est)
                 self.last_seen[est.episode] = time.monotonic()
                 self.summarizer.forget(est.episode)
         elif info.kind == "stats" and info.operator and info.service:
@@ -128,12 +132,21 @@ class Scorer:
         elif K is None:
             self.held.hold(msg.episode, item.key, lambda: self.handle(item), self.svc.rejects)
             return False
-        elif not 1 <= msg.k <= K:
+        elif not 1 <= msg.k <= self._last_step(info, msg):
             reason = "bad_step"
         else:
             return True
         self.svc.rejects.add(item.key, reason)
         return False
+
+    def _last_step(self, info: keys.KeyInfo, msg: Truth | EstimateMsg) -> int:
+        """The last k of a truth (a tick of the truth grid) or of an operator's estimates (its
+        own steps, :mod:`tltrack.config.timeline`): K for all on the paper's shared clock."""
+        timeline = self.summarizer.timeline(msg.episode)
+        if isinstance(msg, Truth):
+            return timeline.ticks
+        sid = info.source if info.kind == "source_estimate" else None
+        return timeline.steps(sid or PRIMARY)
 
     def _stored(self, key: str, inserted: bool) -> bool:
         """A record already stored for its (episode, [filter,] k) is a replay."""
@@ -180,11 +193,11 @@ class Scorer:
         """Score every ended episode that is complete, or quiet for ``grace_s``."""
         now = time.monotonic()
         for e, t_end in list(self.ended.items()):
-            K, counts = self.K.get(e), self.counts.get(e, {})
+            K, counts, need = self.K.get(e), self.counts.get(e, {}), self.need.get(e, {})
             complete = (
                 K is not None
                 and len(counts) >= self.expected.get(e, 3)
-                and all(n >= K for n in counts.values())
+                and all(n >= need.get(f, K) for f, n in counts.items())
             )
             quiet = now - max(t_end, self.last_seen.get(e, t_end)) > self.s.grace_s
             if complete or quiet:

@@ -22,6 +22,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from tltrack.config import make_config
+from tltrack.config.timeline import Timeline
+from tltrack.engine.driver import operator_of
 from tltrack.filters import consistency
 from tltrack.live import latency
 from tltrack.live.scores import squared_error
@@ -52,6 +55,7 @@ class _Scores:
     k: NDArray[np.int64]  #: the steps with both an estimate and the truth
     sq: NDArray[np.float64]  #: their squared position errors
     steps: int
+    expected: int  #: the steps its operator took (K on the paper's shared clock)
     used: int
     recoveries: int
     end_to_end: NDArray[np.float64]  #: ms, one per step
@@ -61,8 +65,17 @@ class _Scores:
     band: NDArray[np.int64]
 
 
+def episode_timeline(store: Store, episode: str) -> Timeline:
+    """When each operator of ``episode`` sampled, from its stored config."""
+    (config,) = store.rows("SELECT config FROM episodes WHERE episode = ?", episode)[0]
+    return make_config(json.loads(config)).timeline
+
+
 def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
-    """Every filter's scores in ``episode``, from its rows alone."""
+    """Every filter's scores in ``episode``, from its rows alone: each estimate against the
+    truth at its operator's sample (on the paper's shared clock, the truth's own step)."""
+    timeline = episode_timeline(store, episode)
+    sources = [sid for sid in timeline.clocks if sid != timeline.primary]
     truth = {
         k: json.loads(pos)
         for k, pos in store.rows(
@@ -78,6 +91,7 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
         rows[row[0]].append(row[1:])
     scores = {}
     for name, mine in rows.items():  # (episode, filter, k) is the key: one row per step
+        operator = operator_of(name, sources)
         k, sq, split, nis, band = [], [], [], [], []
         for row in mine:
             step, pos, _tu, _rec, t_sensor, t_recv, t_sent, step_ms, t_received, t_step = row[:10]
@@ -87,15 +101,19 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
             if window is not None and edges is not None:
                 lo, hi = json.loads(edges)
                 band.append(1 if window > hi else -1 if window < lo else 0)
-            if step in truth and pos is not None:
+            tick = timeline.tick(operator, step) if operator in timeline.clocks else step
+            if tick in truth and pos is not None:
                 k.append(step)
-                sq.append(squared_error(json.loads(pos), truth[step]))
+                sq.append(squared_error(json.loads(pos), truth[tick]))
             if t_received is not None and t_step is not None:
                 split.append(latency.stages(t_sensor, t_received, t_step, step_ms, t_sent, t_recv))
         scores[name] = _Scores(
             k=np.array(k, dtype=np.int64),
             sq=np.array(sq),
             steps=len(mine),
+            expected=timeline.steps(operator)
+            if operator in timeline.clocks
+            else timeline.steps(timeline.primary),
             used=sum(r[2] for r in mine),
             recoveries=sum(r[3] or 0 for r in mine),
             end_to_end=np.array([latency.end_to_end_ms(r[4], r[5]) for r in mine]),
@@ -126,9 +144,16 @@ class Summarizer:
     def __init__(self, store: Store) -> None:
         self.store = store
         self._kept: dict[str, dict[str, _Scores]] = {}
+        self._timelines: dict[str, Timeline] = {}
 
     def forget(self, episode: str) -> None:
         self._kept.pop(episode, None)
+
+    def timeline(self, episode: str) -> Timeline:
+        """:func:`episode_timeline`, read once per episode."""
+        if episode not in self._timelines:
+            self._timelines[episode] = episode_timeline(self.store, episode)
+        return self._timelines[episode]
 
     def summary(
         self, episodes: list[str] | None = None, final: Container[str] = ()
@@ -147,7 +172,6 @@ class Summarizer:
                 if ep in final:
                     self._kept[ep] = scores
             per_episode.append(scores)
-        expected = sum(e[2] for e in eps)
         filters = {}
         end_to_end = [np.empty(0)]  # every filter's, for the overall latency
         split = [np.empty((0, len(latency.STAGES)))]
@@ -156,6 +180,11 @@ class Summarizer:
             end_to_end.append(np.concatenate([s.end_to_end for s in mine]))
             split.append(np.concatenate([s.split for s in mine]))
             steps = sum(s.steps for s in mine)
+            # an episode without this filter's rows expected K of it
+            expected = sum(
+                sc[name].expected if name in sc else e[2]
+                for sc, e in zip(per_episode, eps, strict=True)
+            )
             filters[name] = {
                 **_rmse(np.concatenate([s.k for s in mine]), np.concatenate([s.sq for s in mine])),
                 "steps": steps,

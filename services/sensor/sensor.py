@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from numpy.typing import NDArray
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack.config import Config
+from tltrack.config.timeline import Timeline
 from tltrack.engine.scenario import reports, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
@@ -60,10 +62,8 @@ class Sensor:
 
     def __init__(self, settings: Settings, svc: Service) -> None:
         self.s, self.svc = settings, svc
-        #: episode -> its scans, (M_k, n_z) for k = 1..K
-        self.episodes: Episodes[list[NDArray[np.float64]]] = Episodes(
-            settings.max_episodes, self._open
-        )
+        #: episode -> its scans, (M_k, n_z) for its own steps k = 1..K_i, and its timeline
+        self.episodes: Episodes[Measured] = Episodes(settings.max_episodes, self._open)
 
     def key(self, e: str) -> str:
         sid = self.s.sensor
@@ -81,33 +81,40 @@ class Sensor:
                 self._on_tick(info.episode, item.key, tick)
 
     def _on_tick(self, e: str, key: str, tick: Tick) -> None:
-        z = self.episodes.get(e)
-        if z is None:
+        """Tick n: measure if this sensor samples then (its own step k)."""
+        ep = self.episodes.get(e)
+        if ep is None:
             self.episodes.hold(e, key, lambda: self._on_tick(e, key, tick), self.svc.rejects)
             return
-        if not 1 <= tick.k <= len(z):
+        if not 1 <= tick.k <= ep.timeline.ticks:
             self.svc.rejects.add(key, "too_far")
             return
-        self.svc.publish(
-            self.key(e),
-            Measurement(
-                episode=e,
-                sender=NAME,
-                k=tick.k,
-                t_sensor=time.time(),  # its own time: the tick's hop here is the simulation's
-                sensor=self.s.sensor,
-                z=z[tick.k - 1],
-            ),
-        )
-        self.svc.count("steps")
+        k = ep.timeline.at(tick.k).get(self.s.sensor)
+        if k is not None:
+            self.svc.publish(
+                self.key(e),
+                Measurement(
+                    episode=e,
+                    sender=NAME,
+                    k=k,
+                    t_sensor=time.time(),  # its own time: the tick's hop here is the simulation's
+                    sensor=self.s.sensor,
+                    z=ep.scans[k - 1],
+                ),
+            )
+            self.svc.count("steps")
         self.episodes.retire(e, tick.k + 1)
 
-    def _open(self, start: EpisodeStart, cfg: Config) -> list[NDArray[np.float64]] | None:
+    def _open(self, start: EpisodeStart, cfg: Config) -> Measured | None:
         sid = self.s.sensor
         if sid != PRIMARY and sid not in {src.id for src in cfg.sources}:
             log.info("episode %s has no sensor %s; ignored", start.episode, sid)
             return None
         setup = Setup(cfg)
+        if self.s.replay_csv is not None and not cfg.timeline.synchronous:
+            log.error("episode %s: a replayed file's steps share one clock; refused", start.episode)
+            self.svc.count("replay_refused")
+            return None
         if self.s.replay_csv is None:
             z = reports(setup, start.run, truth(setup, start.run), sid)
         else:
@@ -119,7 +126,15 @@ class Sensor:
                 return None
         how = f"replaying {self.s.replay_csv}" if self.s.replay_csv else "measuring"
         log.info("episode %s (run %d): %s as %s", start.episode, start.run, how, sid)
-        return z
+        return Measured(z, cfg.timeline)
+
+
+@dataclass(frozen=True)
+class Measured:
+    """One episode of this sensor: its scans at its own steps, and when it takes them."""
+
+    scans: list[NDArray[np.float64]]
+    timeline: Timeline
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -1,7 +1,9 @@
-"""Publishes episodes: EpisodeStart, then for k = 1..K a Tick on the world clock, the truth
-(referee only) and, in the single-router topology, each sensor's measurement on its owner's key,
-then EpisodeEnd. In the federated topology (``--measurements false``) each operator's own sensor
-service answers the Tick instead, so no raw data passes through the referee.
+"""Publishes episodes: EpisodeStart, then for each tick n of the truth grid a Tick on the world
+clock, the truth (referee only) and, in the single-router topology, the measurement of each
+sensor that samples at n (its own step k, :mod:`tltrack.config.timeline`) on its owner's key,
+then EpisodeEnd. On the paper's shared clock tick n is every sensor's step n. In the federated
+topology (``--measurements false``) each operator's own sensor service answers the Tick instead,
+so no raw data passes through the referee.
 
 The truth and measurements of episode i are run ``first_run + i`` of ``tltrack experiment`` with
 the same configuration: the same per-run random streams, so trackers can replay it exactly.
@@ -58,7 +60,7 @@ class Settings(BaseSettings):
     lead_s: float = Field(
         0.5, ge=0, le=60, description="wait from an episode's start to its first tick"
     )
-    realtime: bool = Field(False, description="pace at one step per Ts")
+    realtime: bool = Field(False, description="pace at one tick of the truth grid per its period")
     replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
     measurements: bool = Field(
         True, description="publish every sensor's measurements (false: each operator's sensor)"
@@ -106,6 +108,11 @@ class Simulator:
                 "with --measurements false each operator's sensor replays its own rows "
                 "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
             )
+        if settings.replay_csv and not cfg.timeline.synchronous:
+            raise replay.ReplayError(
+                "a replayed file's step k is every sensor's, on one clock; the config gives an "
+                "operator its own period_s, phase_s or clock_offset_s"
+            )
         self.recorded = (
             replay.load(settings.replay_csv, setup, self.sensors) if settings.replay_csv else None
         )
@@ -115,7 +122,7 @@ class Simulator:
     @property
     def period(self) -> float:
         if self.s.realtime:
-            return self.cfg.Ts
+            return self.cfg.timeline.grid_s
         return 1.0 / self.s.pace if self.s.pace > 0 else 0.0
 
     def wait_for_services(self) -> bool:
@@ -136,10 +143,16 @@ class Simulator:
         run = self.s.first_run + i
         e = f"{self.s.episode_prefix}-r{run}"
         sim = None if self.recorded is not None else simulate(self.setup, run)
-        if sim is not None:
-            scans = [{sid: sim.detections(sid, k) for sid in self.sensors} for k in self.steps]
+        timeline = self.cfg.timeline
+        if sim is not None:  # per tick: each sensor that samples then, its step and its scan
+            scans = [
+                {sid: (k, sim.detections(sid, k)) for sid, k in timeline.at(n).items()
+                 if sid in self.sensors}
+                for n in range(1, timeline.ticks + 1)
+            ]  # fmt: skip
         else:
-            scans = self.recorded or []
+            scans = [{sid: (k, z) for sid, z in row.items()} for k, row in
+                     enumerate(self.recorded or [], start=1)]  # fmt: skip
         start = EpisodeStart(
             episode=e,
             sender=NAME,
@@ -159,13 +172,15 @@ class Simulator:
             self.svc.stop.wait(self.s.lead_s)
             self._publish_steps(e, scans, sim)
 
-    def _truth(self, e: str, k: int, t: float, sim: Run) -> Truth:
-        x = sim.truth[k]
-        drawn = primary_scan(self.setup, sim, k)
+    def _truth(self, e: str, n: int, t: float, sim: Run) -> Truth:
+        """The truth at tick n, with the primary's scan as drawn if it samples then."""
+        x = sim.truth[n]
+        k = self.cfg.timeline.at(n).get(PRIMARY)
+        drawn = None if k is None else primary_scan(self.setup, sim, k)
         return Truth(
             episode=e,
             sender=NAME,
-            k=k,
+            k=n,
             t_sensor=t,
             x=x,
             pos=self.layout.position(x),
@@ -173,35 +188,32 @@ class Simulator:
             scan_clutter=drawn[1].tolist() if drawn else [],
         )
 
-    @property
-    def steps(self) -> range:
-        return range(1, self.cfg.K + 1)
-
     def _publish_steps(
-        self, e: str, scans: list[dict[str, NDArray[np.float64]]], sim: Run | None
+        self, e: str, scans: list[dict[str, tuple[int, NDArray[np.float64]]]], sim: Run | None
     ) -> None:
-        """Step k's tick, truth (with the primary's scan as drawn) and each sensor's scan
-        (``scans[k - 1]``) on its owner's key."""
+        """Tick n's Tick, truth (with the primary's scan as drawn) and the scan of each sensor
+        that samples then (``scans[n - 1]``: its step k and detections) on its owner's key."""
         t_next = time.monotonic()
-        for k in range(1, self.cfg.K + 1):
+        n = 0
+        for n in range(1, len(scans) + 1):
             if self.svc.stop.is_set():
                 break
             t_next += self.period
             t = time.time()
-            self.svc.publish(keys.clock(e), Tick(episode=e, sender=NAME, k=k, t_sensor=t))
+            self.svc.publish(keys.clock(e), Tick(episode=e, sender=NAME, k=n, t_sensor=t))
             if sim is not None:
-                self.svc.publish(keys.truth(e), self._truth(e, k, t, sim))
-            for sid in self.sensors:
+                self.svc.publish(keys.truth(e), self._truth(e, n, t, sim))
+            for sid, (k_own, z) in scans[n - 1].items():
                 key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
                 self.svc.publish(
                     key,
                     Measurement(
                         episode=e,
                         sender=NAME,
-                        k=k,
+                        k=k_own,
                         t_sensor=time.time(),  # when this sensor measures: its publication
                         sensor=sid,
-                        z=scans[k - 1][sid],
+                        z=z,
                     ),
                 )
             self.svc.count("steps")
@@ -214,10 +226,10 @@ class Simulator:
             EpisodeEnd(
                 episode=e,
                 sender=NAME,
-                k=k,
+                k=n,
                 t_sensor=time.time(),
                 reason="complete" if done else "aborted",
-                steps_sent=k if done else k - 1,
+                steps_sent=n if done else n - 1,  # ticks of the truth grid
             ),
         )
 

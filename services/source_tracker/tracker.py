@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 from pydantic import Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -23,8 +24,8 @@ from tltrack.live.tracking import (
     StepReport,
     TrackedEpisodes,
 )
-from tltrack.wire import keys
-from tltrack.wire.messages import EpisodeStart, Measurement
+from tltrack.wire import admission, keys
+from tltrack.wire.messages import EpisodeStart, Measurement, Schedule
 from tltrack.wire.transport import Received, ZenohSettings, decode_received
 
 log = logging.getLogger("source_tracker")
@@ -80,6 +81,22 @@ class SourceTracker:
             z = decode_received(item, Measurement, self.svc.rejects)
             if z is not None:
                 self.episodes.offer(info.episode, item.key, z, self.svc.rejects)
+        elif info.kind == "schedule" and info.episode is not None:
+            schedule = decode_received(item, Schedule, self.svc.rejects)
+            if schedule is not None and (refused := admission.refusal(info, schedule)):
+                self.svc.rejects.add(item.key, refused[0])
+            elif schedule is not None:
+                self._on_schedule(info.episode, item.key, schedule)
+
+    def _on_schedule(self, e: str, key: str, schedule: Schedule) -> None:
+        """The primary's schedule: the times its transfers are for (held until the episode
+        opens here)."""
+        ep = self.episodes.get(e)
+        if ep is None:
+            later = partial(self._on_schedule, e, key, schedule)
+            self.episodes.hold(e, key, later, self.svc.rejects)
+        else:
+            ep.tracker.heard(schedule)
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         if self.s.source_id not in {src.id for src in cfg.sources}:
@@ -102,7 +119,7 @@ class SourceTracker:
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
                 self._step(e, ep, z)
-            self.episodes.retire(e, ep.steps.next_k)
+            self.episodes.retire(e, ep.tracker.cfg.timeline.tick(self.s.source_id, ep.steps.next_k))
 
     def _step(self, e: str, ep: Episode, z: Measurement) -> None:
         k, t_sensor = z.k, z.t_sensor
@@ -110,11 +127,12 @@ class SourceTracker:
         est, eta = ep.tracker.step(z)
         step_ms = (time.perf_counter() - t0) * 1e3
         sid = self.s.source_id
-        if k < ep.start.K:
-            self.svc.publish(
-                keys.transfer(sid, e),
-                lambda: ep.tracker.transfer_message(eta, e, k, t_sensor),
-            )
+        if not ep.tracker.addressed:  # off the shared clock, before the primary's schedule came
+            self.svc.count("transfers_unaddressed")
+        for j, t_apply, sent in ep.tracker.sends(eta):
+            if j <= ep.start.K:  # none for the step past the primary's last
+                message = partial(ep.tracker.transfer_message, sent, e, k, t_sensor, j, t_apply)
+                self.svc.publish(keys.transfer(sid, e), message)
         StepReport(
             z,
             sid,
@@ -138,7 +156,9 @@ def main(argv: list[str] | None = None) -> None:
     if FILTERS.get(settings.filter).particle:
         warm_up()  # compiled kernels ready before the token says we are
     with Service(NAME, keys.source_operator(settings.source_id), settings.zenoh) as svc:
-        inbox = svc.subscribe(keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY))
+        inbox = svc.subscribe(
+            keys.EPISODES, keys.source_meas(settings.source_id, keys.ANY), keys.SCHEDULES
+        )
         tracker = SourceTracker(settings, svc)
         for item in svc.running_episodes():
             tracker.handle(item)

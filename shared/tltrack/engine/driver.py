@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import LinkSpec
-from tltrack.config.timeline import US
+from tltrack.config.timeline import US, Timeline
 from tltrack.engine.registry import FilterSpec, Role, build, parse, recovery, source_name
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
@@ -256,13 +256,15 @@ class Sources:
         return 2.0 * self.setup.cfg.max_clock_offset_s
 
     def sends(
-        self, link: Link, k: int, transfer: Observation
+        self, link: Link, k: int, transfer: Observation, timeline: Timeline | None = None
     ) -> list[tuple[int, int, Observation]]:
         """What source filter ``link``'s step k sends, its own transfer for k + 1 in hand: for
         each primary sample j until its next step (:meth:`Timeline.targets
         <tltrack.config.timeline.Timeline.targets>`), (j, the horizon in us, the transfer). Over
-        its own period on a shared clock that is its own (the paper's); else :meth:`ahead`."""
-        timeline = self.setup.cfg.timeline
+        its own period on a shared clock that is its own (the paper's); else :meth:`ahead`.
+        ``timeline``: the source's view (a live source's, from the primary's published
+        schedule); default the config's."""
+        timeline = timeline or self.setup.cfg.timeline
         period = timeline.clocks[link[1]].period_us
         out = []
         for j, horizon in timeline.targets(link[1], k):

@@ -18,7 +18,7 @@ from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 from tltrack.config import Config
-from tltrack.config.timeline import US
+from tltrack.config.timeline import US, Clock, Timeline
 from tltrack.engine.driver import Link, Primaries, Sources, StepRecord, reported_name
 from tltrack.engine.montecarlo import check_filters
 from tltrack.engine.registry import FilterSpec, parse
@@ -38,6 +38,7 @@ from tltrack.wire.messages import (
     Measurement,
     Message,
     RejectCounter,
+    Schedule,
     Transfer,
 )
 from tltrack.wire.transport import Received, decode_received
@@ -172,6 +173,7 @@ class SourceEpisode:
         self.monitor = NisMonitor(self.own.model.n_z)
         self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep, self.monitor])
         self.k = 0
+        self._view: Timeline | None = None  #: its timeline with the primary's published schedule
 
     def _keep(self, record: StepRecord) -> None:
         self._estimates[record.name] = record.estimate
@@ -190,15 +192,31 @@ class SourceEpisode:
         eta = self._half.step(self.k, {self.source_id: statement(self.own, z)})[self._link]
         return self._estimates.pop(self.name), eta
 
+    def heard(self, schedule: Schedule) -> None:
+        """The primary's published schedule: where its samples are on its clock."""
+        ours = self.cfg.timeline
+        primary = Clock(round(schedule.period_s * US), 0, round(schedule.t0_s * US))
+        self._view = dataclasses.replace(ours, clocks={**ours.clocks, PRIMARY: primary})
+
+    @property
+    def addressed(self) -> bool:
+        """Can it address its transfers: on the paper's shared clock (each for k + 1), or off it
+        once it has heard the primary's schedule?"""
+        return self.cfg.timeline.synchronous or self._view is not None
+
     def sends(self, eta: Observation) -> list[tuple[int, float | None, Observation]]:
         """What the last step sends, its own transfer ``eta`` for k + 1 in hand: for each of the
         primary's samples until its next step, (k_apply, t_apply, the transfer), as the engine's
-        step driver sends them; t_apply (s, the primary's schedule) None on the paper's clock."""
-        timeline = self.cfg.timeline
-        stamped = not timeline.synchronous
+        step driver sends them; t_apply (s, the primary's schedule) None on the paper's clock.
+        Nothing before it is :attr:`addressed`."""
+        if self.cfg.timeline.synchronous:
+            return [(j, None, sent) for j, _h, sent in self._half.sends(self._link, self.k, eta)]
+        if self._view is None:
+            return []
+        view = self._view
         return [
-            (j, timeline.stamp(PRIMARY, j) / US if stamped else None, sent)
-            for j, _horizon, sent in self._half.sends(self._link, self.k, eta)
+            (j, view.stamp(PRIMARY, j) / US, sent)
+            for j, _horizon, sent in self._half.sends(self._link, self.k, eta, view)
         ]
 
     def transfer_message(

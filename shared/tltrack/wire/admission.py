@@ -21,15 +21,15 @@ from tltrack.wire.messages import Message
 
 TRUTH_SENDER = "sensor_sim"  #: the only sender of the truth
 
-#: the keys whose message must be about the key's own episode (the scorer's)
-_SCORED = ("truth", "source_estimate", "primary_estimate")
+#: the keys whose message must be about the key's own episode (the scorer's, the schedule)
+_OF_ITS_EPISODE = ("truth", "source_estimate", "primary_estimate", "schedule")
 
 
 def sender(info: keys.KeyInfo) -> str | None:
     """The sender a message on a key of ``info`` must name; None where no receiver checks."""
     if info.kind in ("transfer", "source_estimate"):
         return info.source
-    if info.kind == "primary_estimate":
+    if info.kind in ("primary_estimate", "schedule"):
         return keys.PRIMARY
     if info.kind == "truth":
         return TRUTH_SENDER
@@ -42,6 +42,6 @@ def refusal(info: keys.KeyInfo, msg: Message) -> tuple[str, str] | None:
     want = sender(info)
     if want is not None and msg.sender != want:
         return "wrong_sender", f"sender {msg.sender!r} on a key of {want!r}"
-    if info.kind in _SCORED and msg.episode != info.episode:
+    if info.kind in _OF_ITS_EPISODE and msg.episode != info.episode:
         return "unknown_episode", f"episode {msg.episode!r} on a key of {info.episode!r}"
     return None

@@ -109,6 +109,12 @@ def transfer(sid: str, e: str) -> str:
     return f"{ROOT}/source/{_seg(sid, 'source id')}/transfer/{_seg(e, 'episode id')}"
 
 
+def schedule(e: str) -> str:
+    """The primary's schedule in episode ``e``: when its clock says it samples, none of its data.
+    Its sources read it to address their transfers (:mod:`tltrack.config.timeline`)."""
+    return f"{ROOT}/schedule/{_seg(e, 'episode id')}"
+
+
 def heartbeat(sid: str) -> str:
     """Source ``sid``'s heartbeat: an empty put every period, which the routers let through on
     the direct source-primary link only, so that its silence means that link is down."""
@@ -150,6 +156,7 @@ CLOCKS = clock(ANY)  #: tltrack/clock/*
 PRIMARY_MEAS = primary_meas(ANY)  #: tltrack/primary/meas/*
 SOURCE_MEAS = source_meas(ANY, ANY)  #: tltrack/source/*/meas/*
 TRANSFERS = transfer(ANY, ANY)  #: tltrack/source/*/transfer/*
+SCHEDULES = schedule(ANY)  #: tltrack/schedule/*
 HEARTBEATS = heartbeat(ANY)  #: ``tltrack/source/*/heartbeat``
 SOURCE_ESTIMATES = source_estimate(ANY, ANY)  #: tltrack/source/*/estimate/*
 PRIMARY_ESTIMATES = primary_estimate(ANY, ANY)  #: tltrack/primary/estimate/*/*
@@ -165,6 +172,7 @@ KeyKind = Literal[
     "primary_meas",
     "source_meas",
     "transfer",
+    "schedule",
     "heartbeat",
     "source_estimate",
     "primary_estimate",
@@ -199,6 +207,8 @@ def parse(key: str) -> KeyInfo:
         return KeyInfo("truth", episode=p[2], operator=REFEREE)
     if n == 3 and p[1] == "clock":
         return KeyInfo("clock", episode=p[2], operator=REFEREE)
+    if n == 3 and p[1] == "schedule":
+        return KeyInfo("schedule", episode=p[2], operator=PRIMARY)
     if n == 3 and p[1:3] == ["scorer", "summary"]:
         return KeyInfo("scorer_summary", operator=REFEREE, service="scorer")
     if p[1] == PRIMARY:

@@ -412,10 +412,24 @@ class Tick(Message):
     type: Literal["tick"] = "tick"
 
 
+class Schedule(Message):
+    """When the primary samples, on its own clock: its sample j at ``t0_s + j period_s`` seconds
+    from the episode's start. Public to its sources, who address each transfer to one of these
+    times (``Transfer.t_apply``); none of its data."""
+
+    TYPE: ClassVar[str] = "schedule"
+    type: Literal["schedule"] = "schedule"
+    period_s: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    t0_s: Annotated[float, Field(allow_inf_nan=False)]
+
+
 #: every message class by its ``type`` tag
 MESSAGE_TYPES: dict[str, type[Message]] = {
-    m.TYPE: m for m in (Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd, Tick)
-}
+    m.TYPE: m
+    for m in (
+        Measurement, Truth, Transfer, EstimateMsg, EpisodeStart, EpisodeEnd, Tick, Schedule
+    )
+}  # fmt: skip
 
 M = TypeVar("M", bound=Message)
 
