@@ -250,8 +250,7 @@ class Sources:
         """The spread a source gives its horizon to the primary's sample, from the clock bound b:
         each clock within +-b of the truth, so the two differ by some constant tau, |tau| <= 2b.
         A constant error is a bias, not noise: only a spread of 2b makes the transfer's added
-        covariance (2b)^2 v v' cover tau^2 v v' whatever tau is (sqrt(2/3) b, the variance of
-        two independent uniform clocks, left TL worse than the isolated filter: papers/links).
+        covariance (2b)^2 v v' cover tau^2 v v' whatever tau is (papers/links/README.md).
         0 on the paper's shared clock."""
         return 2.0 * self.setup.cfg.max_clock_offset_s
 
