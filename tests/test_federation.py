@@ -168,6 +168,41 @@ def test_raw_data_never_leaves_its_owners_router_and_lockstep_equals_the_engine(
     assert [live["tl-rpf"][k][1] for k in range(1, K + 1)] == [False] + [True] * (K - 1)
 
 
+#: a source sampling every 2 s, its clock a quarter second ahead of the primary's
+VEHICLES = {
+    "max_clock_offset_s": 0.25,
+    "sources": [{"id": "s1", "period_s": 2.0, "clock_offset_s": 0.25}],
+}
+
+
+def test_on_their_own_clocks_the_schedule_crosses_the_routers_and_lockstep_equals_the_engine(
+    tmp_path,
+):
+    """The primary's schedule goes from its router to the source's (the routers' ACLs let that
+    key, and nothing else of the primary, out to a source); the source addresses its transfers
+    by it, and the lock-step estimates are the engine's."""
+    steps = 16
+    db = tmp_path / "scorer.sqlite"
+    given = tmp_path / "vehicles.json"
+    given.write_text(json.dumps(VEHICLES))
+    with federation(tmp_path) as (s, relays):
+        s.start_router()
+        run_episode(s, db, steps, 0.0, {"TLTRACK_PRIMARY_LOCKSTEP": "true"}, sim_config=given)
+        assert s.wait("sensor_sim", 120) == 0, logs(s)
+        assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        live = estimates(db)
+        direct = relays["source/s1", "primary"].bytes()  # both ways
+    assert b"\xa8schedule" in direct, "no schedule on the primary-source link"
+    cfg = config(steps, **VEHICLES)
+    offline = trace_run(cfg, list(LIVE), run=0)
+    for name in LIVE:
+        n = cfg.timeline.steps("s1") if name.startswith("source-") else steps
+        got = np.array([live[name][k][0] for k in range(1, n + 1)])
+        np.testing.assert_allclose(got, offline[name], rtol=0, atol=1e-9, err_msg=name)
+    # the source's first step, at 2 s, sends for the primary's 3 s: every step from there is TL
+    assert [live["tl-rpf"][k][1] for k in range(1, steps + 1)] == [False] * 2 + [True] * 14
+
+
 def test_the_owner_enforces_even_against_a_primary_router_that_allows_everything(tmp_path):
     """The primary's router runs without access control, and a client on it subscribes to every
     key: it still gets none of the source's raw data, since the source's router never lets it
