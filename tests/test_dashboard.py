@@ -149,6 +149,27 @@ def test_rmse_is_the_scorers_mean_of_position_errors_whatever_the_arrival_order(
 
 
 @pytest.mark.unit
+def test_each_filter_is_measured_against_the_truth_at_its_own_samples():
+    """Off the shared clock the truth comes by tick of its grid (0.5 s here: a source sampling
+    every 1.5 s from 0.5 s, the primary every second); a source's step 1 is tick 4, the
+    primary's step 1 tick 2."""
+    state, _metrics, ingest, rejects = make()
+    cfg = make_config(
+        preset="arasaratnam-haykin", K=3, sources=[{"id": "s1", "period_s": 1.5, "phase_s": 0.5}]
+    )
+    begin = start(3).model_copy(update={"config": cfg.model_dump(mode="json")})
+    ingest.handle(received(keys.episode(E), begin))
+    for n in range(1, 7):
+        ingest.handle(received(keys.truth(E), truth(n, 10.0 * n, 0.0)))
+    ingest.handle(received(keys.source_estimate("s1", E), estimate("source-pf", 1, 43.0, 0.0)))
+    ingest.handle(received(keys.primary_estimate("tl", E), estimate("tl-pf", 1, 20.0, 1.0)))
+    f = {x["name"]: x for x in state.snapshot()["episode"]["filters"]}
+    assert f["source-pf"]["error"] == [[1, 3.0]]  # against tick 4 (x = 40), not tick 1
+    assert f["tl-pf"]["error"] == [[1, 1.0]]  # against tick 2 (x = 20)
+    assert rejects.total == 0
+
+
+@pytest.mark.unit
 def test_replays_and_floods_stay_bounded_and_are_counted():
     state, _metrics, ingest, rejects = make()  # 2 episodes, 50 steps, 3 filters
     key = keys.primary_estimate("tl", E)

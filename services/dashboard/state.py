@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+from tltrack.config.timeline import Timeline
+from tltrack.engine.driver import operator_of
 from tltrack.engine.setup import PRIMARY, sensor_spec
 from tltrack.filters import consistency
 from tltrack.live import latency
@@ -59,6 +61,7 @@ class Track:
     """One filter's estimates in one episode, keyed by step."""
 
     role: Role
+    operator: str = PRIMARY  #: whose samples its steps are (a source's id for a source's)
     pos: dict[int, XY] = field(default_factory=dict)
     used: dict[int, bool] = field(default_factory=dict)
     latency_ms: dict[int, float] = field(default_factory=dict)
@@ -107,8 +110,19 @@ class Episode:
     started: float | None = None
     ended: str | None = None  #: the end reason once EpisodeEnd arrived
     sensors: dict[str, tuple[XY, str]] = field(default_factory=dict)  #: id -> (where, kind)
-    truth: dict[int, XY] = field(default_factory=dict)
+    truth: dict[int, XY] = field(default_factory=dict)  #: by tick of the truth grid
     tracks: dict[str, Track] = field(default_factory=dict)
+    #: when each operator samples (None until the start): a filter's step k is a truth tick
+    timeline: Timeline | None = None
+
+    def tick(self, track: Track, k: int) -> int:
+        """The truth's tick of a filter's step k (k itself on the paper's shared clock)."""
+        return k if self.timeline is None else self.timeline.tick(track.operator, k)
+
+    def step(self, track: Track, n: int) -> int | None:
+        """A filter's step at truth tick n, if its operator sampled then."""
+        return n if self.timeline is None else self.timeline.at(n).get(track.operator)
+
     #: the latest step's scan of the primary as the simulation drew it: k, (x, y, is_clutter)
     scan: tuple[int, list[tuple[float, float, bool]]] = (0, [])
 
@@ -222,6 +236,9 @@ class State:
             ep.run, ep.K, ep.started = m.run, m.K, m.t_sensor
             ep.steps_per_sec = m.steps_per_sec
             cfg = m.parsed_config()  # validated on receipt
+            ep.timeline = cfg.timeline
+            for name, tr in ep.tracks.items():  # estimates that came before the start
+                tr.operator = operator_of(name, [s.id for s in cfg.sources])
             ep.sensors = {}
             for sid in [PRIMARY, *(s.id for s in cfg.sources[:16])]:
                 spec = sensor_spec(cfg, sid)
@@ -248,9 +265,9 @@ class State:
                 )
             updates = []
             for name, tr in ep.tracks.items():
-                if m.k in tr.pos:
-                    e = tr.set_error(m.k, t)
-                    updates.append(ErrorUpdate(name, m.k, e, tr.rmse or 0.0))
+                if (k := ep.step(tr, m.k)) is not None and k in tr.pos:
+                    e = tr.set_error(k, t)
+                    updates.append(ErrorUpdate(name, k, e, tr.rmse or 0.0))
             self.version += 1
             return "new", updates
 
@@ -263,7 +280,10 @@ class State:
             if tr is None:
                 if len(ep.tracks) >= self.max_filters:
                     return "capacity", None
-                tr = ep.tracks[m.filter] = Track(role)
+                tl = ep.timeline
+                sources = [] if tl is None else [sid for sid in tl.clocks if sid != tl.primary]
+                operator = operator_of(m.filter, sources) if sources else PRIMARY
+                tr = ep.tracks[m.filter] = Track(role, operator)
             if m.k in tr.pos:
                 return "duplicate", None
             if len(tr.pos) >= self.max_steps:
@@ -276,7 +296,7 @@ class State:
             if (split := latency.of(m, t_recv)) is not None:
                 tr.stages[m.k] = split
             update = None
-            if (t := ep.truth.get(m.k)) is not None:
+            if (t := ep.truth.get(ep.tick(tr, m.k))) is not None:
                 update = ErrorUpdate(m.filter, m.k, tr.set_error(m.k, t), tr.rmse or 0.0)
             self.version += 1
             return "new", update
