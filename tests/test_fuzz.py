@@ -65,7 +65,7 @@ from tltrack.wire.messages import (
 from tltrack.wire.transport import Subscriber
 
 E = "ep-r0"
-T0 = 1.8e9
+T0 = 1.7e9  #: in the past: a stamp from the future is refused as such (from_the_future)
 SPD2 = [[4.0, 0.01], [0.01, 1e-4]]
 SPD4 = np.diag([25.0, 4.0, 25.0, 4.0]).tolist()
 

@@ -188,7 +188,7 @@ def test_where_one_clock_is_assumed_another_is_refused_with_the_reason(tmp_path:
 def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
     """Live, a transfer names the primary's sample (k_apply) and its time on the primary's
     schedule (t_apply): one for another time, or none at all off the shared clock, or one made
-    later than now beyond the clocks' bound, is refused and counted, never kept for a step."""
+    later than now beyond the hosts' clock skew, is refused and counted, never kept for a step."""
     svc = Offline("primary_tracker")
     tracker = primary_svc.PrimaryTracker(primary_svc.Settings.model_validate({}), svc)
     cfg = make_config(
@@ -220,7 +220,7 @@ def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
 
     offer(5.0 + 0.002)  # 2 ms off, beyond the 1 ms tolerance
     offer(None)  # off the shared clock a transfer must say its time
-    offer(5.0, t_sensor=time.time() + 2.0)  # made 2 s from now: beyond twice the 0.25 s bound
+    offer(5.0, t_sensor=time.time() + 2.0)  # made 2 s from now: beyond the hosts' 1 s skew
     assert svc.rejects.by_reason() == {"wrong_time": 2, "from_the_future": 1}
     assert tracker.episodes.get("e").transfers == {}  # type: ignore[union-attr]
     offer(5.0 + 0.0005)

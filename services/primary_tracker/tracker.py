@@ -50,6 +50,12 @@ class Settings(BaseSettings):
     transfer_tolerance_ms: float = Field(
         1.0, ge=0, description="a transfer's t_apply may differ this much from its sample's time"
     )
+    clock_skew_ms: float = Field(
+        1000.0,
+        gt=0,
+        description="the hosts' wall clocks differ by up to this: a transfer stamped later than "
+        "now by more is refused",
+    )
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
     heartbeat_s: float = Field(
         0.1, gt=0, le=10, description="the sources' heartbeat period: two missed mean a cut link"
@@ -186,8 +192,7 @@ class PrimaryTracker:
         if not self._on_time(ep, t):
             self.svc.rejects.add(key, "wrong_time")
             return
-        ahead = t.t_sensor - time.time()  # made later than now: a clock beyond its bound
-        if ahead > ep.tracker.cfg.max_clock_offset_s * 2 + self.s.transfer_tolerance_ms / 1e3:
+        if t.t_sensor - time.time() > self.s.clock_skew_ms / 1e3:  # made later than now
             self.svc.rejects.add(key, "from_the_future")
             return
         if t.k_apply >= ep.steps.next_k + ep.steps.window:
@@ -202,8 +207,9 @@ class PrimaryTracker:
     def _on_time(self, ep: Episode, t: Transfer) -> bool:
         """Is a transfer for the time of the sample it names, on this primary's schedule? On
         the paper's shared clock it may leave ``t_apply`` out; otherwise it must give it within
-        ``transfer_tolerance_ms``: never applied to another time. (One stamped, by its maker's
-        clock, later than now by more than two clock bounds is refused too: ``from_the_future``.)
+        ``transfer_tolerance_ms``: never applied to another time. (One stamped, by the wall clock
+        of the host that made it, later than now by more than ``clock_skew_ms`` is refused too:
+        ``from_the_future``.)
         """
         timeline = ep.tracker.cfg.timeline
         if t.t_apply is None:
