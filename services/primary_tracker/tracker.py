@@ -5,7 +5,8 @@ primary waits for missing transfers at most ``deadline_ms`` after z_k is ready, 
 a source whose liveliness token is gone, nor for one whose heartbeat has been silent for two of its
 periods (``heartbeat_s``): its direct link is cut (:mod:`tltrack.live.heartbeat`), though its token
 still arrives through the referee's router. Then it takes the step with what it has (an isolated
-step if nothing). ``lockstep`` waits without a deadline, for tests and exact replays.
+step if nothing). ``lockstep`` waits without a deadline, and whatever the heartbeat says, as long
+as the source's token lives: for tests and exact replays.
 
 The isolated twin is there only for comparison. It steps ``twin_delay_ms`` after the TL estimate
 is out, when that estimate's hops to its receivers no longer compete with it for the CPU.
@@ -263,8 +264,11 @@ class PrimaryTracker:
 
     def _worth_waiting(self, sid: str) -> bool:
         """A source whose token went away is not waited for, nor one whose link is cut; an unseen
-        one is (it may be late)."""
-        return (sid in self.alive or sid not in self.seen) and not self.links.is_cut(sid)
+        one is (it may be late). Lock-step waits as long as the token lives, whatever the
+        heartbeat says: a loaded host delays heartbeats past two periods (a false cut), and an
+        exact replay must not step on without a transfer that is still coming."""
+        alive = sid in self.alive or sid not in self.seen
+        return alive and (self.s.lockstep or not self.links.is_cut(sid))
 
     def _step(self, e: str, ep: Episode, z: Measurement, transfers: dict[str, Transfer]) -> None:
         """The TL estimate goes out first; the isolated twin's later (:meth:`_step_twins`)."""
