@@ -194,7 +194,8 @@ def test_an_episodes_estimates_as_tltrack_tracks_csv(tmp_path: Path) -> None:
     store.close()
     r = scores("--db", str(db), "--estimates", str(out))
     assert r.exit_code == 2
-    assert "name one episode (--episode) of the 2 held: ['ep-a', 'ep-b']" in r.output
+    text = " ".join(r.output.split())  # the console wraps a long --db path
+    assert "name one episode (--episode) of the 2 held: ['ep-a', 'ep-b']" in text
     r = scores("--db", str(db), "--episode", "ep-a", "--estimates", str(out))
     assert r.exit_code == 0, r.output
     write_estimates(want, "ct", rows)

@@ -168,17 +168,17 @@ class PrimaryTracker:
             self.svc.count("episodes_refused")
             return None
         log.info("episode %s (run %d): %s and %s", start.episode, start.run, *tracker.names)
-        self._announce(start.episode, cfg)
+        self._announce(start.episode, tracker)
         return Episode(start, tracker, [s.id for s in cfg.sources])
 
-    def _announce(self, e: str, cfg: Config) -> None:
+    def _announce(self, e: str, tracker: PrimaryEpisode) -> None:
         """Publish this primary's schedule for its sources, off the paper's shared clock (on
         it, each transfer is simply for k + 1). Again at each step, for a source that joins
         late."""
-        if not cfg.timeline.synchronous:
-            t0 = cfg.timeline.stamp(PRIMARY, 0) / US
+        if not tracker.timeline.synchronous:
+            t0 = tracker.timeline.stamp(PRIMARY, 0) / US
             msg = Schedule(episode=e, sender=keys.PRIMARY, k=0, t_sensor=time.time(),
-                           period_s=cfg.Ts, t0_s=t0)  # fmt: skip
+                           period_s=tracker.cfg.Ts, t0_s=t0)  # fmt: skip
             self.svc.publish(keys.schedule(e), msg)
 
     def _on_transfer(self, e: str, sid: str, key: str, t: Transfer) -> None:
@@ -212,7 +212,7 @@ class PrimaryTracker:
         of the host that made it, later than now by more than ``clock_skew_ms`` is refused too:
         ``from_the_future``.)
         """
-        timeline = ep.tracker.cfg.timeline
+        timeline = ep.tracker.timeline
         if t.t_apply is None:
             return timeline.synchronous
         own = timeline.stamp(PRIMARY, t.k_apply) / US
@@ -237,7 +237,7 @@ class PrimaryTracker:
                 now = time.monotonic()
                 if ep.ready_since is None:
                     ep.ready_since = now
-                timeline = ep.tracker.cfg.timeline
+                timeline = ep.tracker.timeline
                 # the paper's source sends nothing for k = 1; others by their schedule
                 have = ep.transfers.get(z.k, {}) if z.k > 1 or not timeline.synchronous else {}
                 waiting = [
@@ -259,7 +259,7 @@ class PrimaryTracker:
             if (due := self._step_twins(e, ep)) is not None:
                 wait = _sooner(wait, due)
             else:
-                self.episodes.retire(e, ep.tracker.cfg.timeline.tick(PRIMARY, ep.steps.next_k))
+                self.episodes.retire(e, ep.tracker.timeline.tick(PRIMARY, ep.steps.next_k))
         return wait
 
     def _worth_waiting(self, sid: str) -> bool:
@@ -290,7 +290,7 @@ class PrimaryTracker:
             tracker.monitor.last.get(tracker.tl_name),
         ).publish(self.svc, keys.primary_estimate("tl", e))
         self._twin_later(e, ep, z)
-        self._announce(e, tracker.cfg)
+        self._announce(e, tracker)
         self.svc.count("steps")
         if not z.z:
             self.svc.count("empty_scans")

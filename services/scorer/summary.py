@@ -92,6 +92,8 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
     scores = {}
     for name, mine in rows.items():  # (episode, filter, k) is the key: one row per step
         operator = operator_of(name, sources)
+        if operator not in timeline.clocks:  # a source the episode's config does not name
+            operator = timeline.primary  # is scored at the primary's samples
         k, sq, split, nis, band = [], [], [], [], []
         for row in mine:
             step, pos, _tu, _rec, t_sensor, t_recv, t_sent, step_ms, t_received, t_step = row[:10]
@@ -101,7 +103,7 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
             if window is not None and edges is not None:
                 lo, hi = json.loads(edges)
                 band.append(1 if window > hi else -1 if window < lo else 0)
-            tick = timeline.tick(operator, step) if operator in timeline.clocks else step
+            tick = timeline.tick(operator, step)
             if tick in truth and pos is not None:
                 k.append(step)
                 sq.append(squared_error(json.loads(pos), truth[tick]))
@@ -111,9 +113,7 @@ def episode_scores(store: Store, episode: str) -> dict[str, _Scores]:
             k=np.array(k, dtype=np.int64),
             sq=np.array(sq),
             steps=len(mine),
-            expected=timeline.steps(operator)
-            if operator in timeline.clocks
-            else timeline.steps(timeline.primary),
+            expected=timeline.steps(operator),
             used=sum(r[2] for r in mine),
             recoveries=sum(r[3] or 0 for r in mine),
             end_to_end=np.array([latency.end_to_end_ms(r[4], r[5]) for r in mine]),

@@ -140,12 +140,21 @@ class Timeline:
     def expects(self, sid: str, j: int) -> bool:
         """Does some step of source ``sid`` send a transfer for the primary's sample j? Not
         before its first step's first target (the paper's primary steps alone at k = 1)."""
-        k = 1
-        while not (first := self.targets(sid, k)):
-            k += 1
-            if k > self.steps(sid):
-                return False
-        return first[0][0] <= j
+        first = self._first_targets.get(sid)
+        return first is not None and first <= j
+
+    @cached_property
+    def _first_targets(self) -> dict[str, int]:
+        """Each source's first primary sample it sends for (none: it never sends)."""
+        first: dict[str, int] = {}
+        for sid in self.clocks:
+            if sid == self.primary:
+                continue
+            for k in range(1, self.steps(sid) + 1):
+                if targets := self.targets(sid, k):
+                    first[sid] = targets[0][0]
+                    break
+        return first
 
     def targets(self, sid: str, k: int) -> list[tuple[int, int]]:
         """The primary's samples j that source ``sid``'s step k sends transfers for, each with

@@ -219,8 +219,9 @@ class Sources:
         for name, sid in links:
             spec = parse(name)
             own = setup.sensors[sid]
-            start, P0 = setup.operator(sid).start(sid, x0_hat)
-            filt = build(spec, setup.operator(sid), start, runs, source_id=sid, P0=P0)
+            operator = setup.operator(sid)
+            start, P0 = operator.start(sid, x0_hat)
+            filt = build(spec, operator, start, runs, source_id=sid, P0=P0)
             self.roles[name, sid] = Source(filt, own.model, own.R, recovery(spec, setup.cfg))
             self.names[name, sid] = reported_name(spec, sid, n)
 

@@ -163,6 +163,7 @@ class SourceEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
         self.cfg, self.source_id = cfg, source_id
+        self.timeline = cfg.timeline  #: built once: ``cfg.timeline`` builds it at each read
         setup, x0_hat = _start(cfg, run)
         self.layout = setup.layout
         self.own = setup.sensors[source_id]
@@ -194,7 +195,7 @@ class SourceEpisode:
 
     def heard(self, schedule: Schedule) -> None:
         """The primary's published schedule: where its samples are on its clock."""
-        ours = self.cfg.timeline
+        ours = self.timeline
         primary = Clock(round(schedule.period_s * US), 0, round(schedule.t0_s * US))
         self._view = dataclasses.replace(ours, clocks={**ours.clocks, PRIMARY: primary})
 
@@ -202,14 +203,14 @@ class SourceEpisode:
     def addressed(self) -> bool:
         """Can it address its transfers: on the paper's shared clock (each for k + 1), or off it
         once it has heard the primary's schedule?"""
-        return self.cfg.timeline.synchronous or self._view is not None
+        return self.timeline.synchronous or self._view is not None
 
     def sends(self, eta: Observation) -> list[tuple[int, float | None, Observation]]:
         """What the last step sends, its own transfer ``eta`` for k + 1 in hand: for each of the
         primary's samples until its next step, (k_apply, t_apply, the transfer), as the engine's
         step driver sends them; t_apply (s, the primary's schedule) None on the paper's clock.
         Nothing before it is :attr:`addressed`."""
-        if self.cfg.timeline.synchronous:
+        if self.timeline.synchronous:
             return [(j, None, sent) for j, _h, sent in self._half.sends(self._link, self.k, eta)]
         if self._view is None:
             return []
@@ -259,6 +260,7 @@ class PrimaryEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
+        self.timeline = cfg.timeline  #: built once: ``cfg.timeline`` builds it at each read
         setup, x0_hat = _start(cfg, run)
         self.layout = setup.layout
         self.own = setup.sensors[PRIMARY]
