@@ -6,14 +6,15 @@ counted once it has waited too long (tltrack.live.held)."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import pytest
 from doubles import episode_end, episode_start, received
-from tltrack.config import Config
+from tltrack.config import Config, make_config
 from tltrack.live.held import Held
-from tltrack.live.tracking import Episodes
+from tltrack.live.tracking import Episodes, SourceEpisode, StepQueue, TrackedEpisodes
 from tltrack.wire import keys
-from tltrack.wire.messages import EpisodeStart, RejectCounter
+from tltrack.wire.messages import EpisodeStart, Measurement, RejectCounter
 
 pytestmark = pytest.mark.unit
 
@@ -85,3 +86,44 @@ def test_a_sample_whose_episode_never_starts_is_counted_after_the_ttl() -> None:
     assert rejects.count(reason="unknown_episode") == 1
     assert held.release("ep-never") == []
     assert handled == []
+
+
+@dataclass
+class _Tracked:
+    tracker: SourceEpisode
+    steps: StepQueue[Measurement] = field(default_factory=StepQueue)
+
+
+@pytest.mark.parametrize("clutter", [False, True])
+def test_a_tracker_takes_only_scans_its_sensor_could_have_made(clutter: bool) -> None:
+    """The paper's sensor reports exactly one detection of its two components; a sensor with
+    false alarms, any number of them."""
+    detection = {"pd": 0.9, "clutter_rate": 5.0} if clutter else None
+    cfg = make_config(K=K, particles=50, sources=[{"id": "s1", "detection": detection}])
+    opened: list[_Tracked] = []
+
+    def open_(start: EpisodeStart, _cfg: Config) -> _Tracked:
+        opened.append(_Tracked(SourceEpisode(cfg, 0, "ukf", "s1")))
+        return opened[-1]
+
+    episodes: TrackedEpisodes[_Tracked] = TrackedEpisodes(4, open_)
+    rejects = RejectCounter()
+    episodes.handle(received(keys.episode("ep-a"), episode_start("ep-a", K)), rejects, False)
+    key = keys.source_meas("s1", "ep-a")
+
+    def offer(k: int, z: list[list[float]]) -> None:
+        msg = Measurement(episode="ep-a", sender="s1", k=k, t_sensor=0.0, sensor="s1", z=z)
+        episodes.offer("ep-a", key, msg, rejects)
+
+    offer(1, [[1000.0, 0.1, 5.0]])  # three components from a range-bearing sensor
+    offer(1, [[1000.0, 0.1]])
+    offer(2, [[1000.0, 0.1], [2000.0, 0.2]])  # two detections
+    offer(3, [])  # none
+    queued = opened[0].steps
+    taken = []
+    while queued.ready() is not None:
+        taken.append(queued.release().z)
+    both = [[[1000.0, 0.1], [2000.0, 0.2]], []]
+    assert taken == [[[1000.0, 0.1]], *(both if clutter else [])]
+    assert rejects.count(reason="bad_shape") == (1 if clutter else 3), rejects.snapshot()
+    assert rejects.total == rejects.count(reason="bad_shape")

@@ -84,14 +84,6 @@ class Episode:
     #: the twin's steps still to take, in order: (z_k or None for a gap, when due, monotonic)
     twins: deque[tuple[Measurement | None, float]] = field(default_factory=deque)
 
-    @property
-    def n_z(self) -> int:
-        return self.tracker.n_z
-
-    @property
-    def one_detection(self) -> bool:
-        return self.tracker.one_detection
-
 
 class PrimaryTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:

@@ -57,14 +57,6 @@ class Episode:
     tracker: SourceEpisode
     steps: StepQueue[Measurement] = field(default_factory=StepQueue)
 
-    @property
-    def n_z(self) -> int:
-        return self.tracker.n_z
-
-    @property
-    def one_detection(self) -> bool:
-        return self.tracker.one_detection
-
 
 class SourceTracker:
     def __init__(self, settings: Settings, svc: Service) -> None:

@@ -391,11 +391,9 @@ class StepQueue(Generic[T]):
         return list(range(first, self.next_k))
 
 
-class Tracked(Protocol):
-    """What an episode's state needs for :meth:`TrackedEpisodes.offer`: its queue of
-    measurements, and the size of its sensor's measurement."""
-
-    steps: StepQueue[Measurement]
+class Sensing(Protocol):
+    """What a tracker's episode tells of its own sensor (:class:`SourceEpisode`,
+    :class:`PrimaryEpisode`)."""
 
     @property
     def n_z(self) -> int: ...
@@ -404,6 +402,16 @@ class Tracked(Protocol):
     def one_detection(self) -> bool:
         """Does its sensor report exactly one detection per step (the paper's sensor)?"""
         ...
+
+
+class Tracked(Protocol):
+    """What an episode's state needs for :meth:`TrackedEpisodes.offer`: its queue of
+    measurements, and its tracker, which knows its sensor's measurement."""
+
+    steps: StepQueue[Measurement]
+
+    @property
+    def tracker(self) -> Sensing: ...
 
 
 S = TypeVar("S")
@@ -507,7 +515,8 @@ class TrackedEpisodes(Episodes[E]):
         if ep is None:
             self.hold(e, key, lambda: self.offer(e, key, z, rejects), rejects)
             return
-        if any(len(d) != ep.n_z for d in z.z) or (ep.one_detection and len(z.z) != 1):
+        own = ep.tracker
+        if any(len(d) != own.n_z for d in z.z) or (own.one_detection and len(z.z) != 1):
             rejects.add(key, "bad_shape")
             return
         verdict = ep.steps.offer(z.k, z)
