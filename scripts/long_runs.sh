@@ -96,6 +96,9 @@ run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
 run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTTER"
 # The headline's factor at the study's N = 6000, on a grid below the study's first point.
 run "$CLUTTER" factor-200 --script papers/clutter/factor.py 200 "$CLUTTER/factor"
+# ... with the paper's clean sensor at the source, and its gates against R's
+run "$CLUTTER" factor-clean-200 --script papers/clutter/factor.py 200 "$CLUTTER/factor-clean" clean
+run "$CLUTTER" gates-200 --script papers/clutter/gates.py 200
 
 # ---- papers/links: a lossy, late link between vehicles (rpf, N = 6000)
 run "$LINKS" links-200 study links --kind rpf --runs 200 --out "$LINKS/runs-200"

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tltrack.config import detection_of
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.studies import Runner, Setting
 from tltrack.studies.clutter import (
@@ -96,3 +97,15 @@ def test_a_tiny_study_writes_its_table_numbers_and_plot(tmp_path: Path) -> None:
     assert abs(cells["pd 0.9 | 2"]["measured_per_gate"] - 2.0) <= 4 * math.sqrt(2.0 / 24)
     assert set(cells["pd 0.9 | 2"]["filters"]) >= set(FILTERS)
     assert set(data["lost_5pct_density"]["0.9"]) == set(FILTERS)
+
+
+def test_a_clean_source_is_the_papers_sensor_and_the_light_one_the_studys() -> None:
+    light = configs(Setting(runs=1), 0.9, (0.5,), K=10)[0]
+    clean = configs(Setting(runs=1), 0.9, (0.5,), source=(1.0, 0.0), K=10)[0]
+    assert clean.sources[0].detection is None
+    assert Setup(clean).sensors["s1"].detection.trivial
+    got = detection_of(light, "s1")
+    assert got.pd == 0.95
+    per_gate = got.clutter_rate * gate_volume(Setup(light).sensors["s1"].R) / got.volume
+    assert per_gate == pytest.approx(0.05)
+    assert clean.primary_detection == light.primary_detection  # the primary's cell is the same

@@ -117,15 +117,18 @@ def configs(
     setting: Setting,
     pd: float,
     densities: Sequence[float] = DENSITIES,
+    source: tuple[float, float] = (SOURCE_PD, SOURCE_PER_GATE),
     **changes: Any,
 ) -> list[Config]:
-    """One configuration per density at ``pd``, differing only in the primary's detection."""
+    """One configuration per density at ``pd``, differing only in the primary's detection;
+    ``source`` is the sources' (pd, clutter per gate), (1, 0) the paper's sensor."""
     base = setting.config(6000, preset="paper", truth="fixed", **changes)
     setup = Setup(base)
     sid = setup.source_ids[0]
-    src = detection(setup, sid, SOURCE_PER_GATE, SOURCE_PD, field_of_view(setup, sid))
-    sources = [{**s.model_dump(exclude_none=True), "detection": src} for s in base.sources]
-    base = base.with_(sources=sources)
+    if source != (1.0, 0.0):
+        src = detection(setup, sid, source[1], source[0], field_of_view(setup, sid))
+        sources = [{**s.model_dump(exclude_none=True), "detection": src} for s in base.sources]
+        base = base.with_(sources=sources)
     fov = field_of_view(setup)
     return [base.with_(primary_detection=detection(setup, PRIMARY, d, pd, fov)) for d in densities]
 
@@ -243,15 +246,16 @@ def clutter(
     densities: Sequence[float] = DENSITIES,
     pds: Sequence[float] = PDS,
     filters: Sequence[str] = FILTERS,
+    source: tuple[float, float] = (SOURCE_PD, SOURCE_PER_GATE),
     **changes: Any,
 ) -> Path:
-    """Every filter of ``filters`` at every (pd, density) of the grid; ``changes`` go to the
-    base configuration (a test's short K)."""
+    """Every filter of ``filters`` at every (pd, density) of the grid, the sources' (pd, clutter
+    per gate) ``source``; ``changes`` go to the base configuration (a test's short K)."""
     names = list(filters)
     swept: dict[float, list[Results]] = {}
     cells: dict[float, list[Config]] = {}
     for pd in pds:
-        cells[pd] = configs(setting, pd, densities, **changes)
+        cells[pd] = configs(setting, pd, densities, source, **changes)
         swept[pd] = run_sweep(
             cells[pd],
             names,
@@ -267,7 +271,12 @@ def clutter(
     sid = setup.source_ids[0]
     fov = dict(base.primary_detection.fov) if base.primary_detection else {}
     src = next(s for s in base.sources if s.id == sid).detection
-    assert src is not None
+    src_text = (
+        "the paper's sensor: every scan its target's measurement alone"
+        if src is None
+        else f"pd {src.pd:g}, {source[1]:g} per gate (clutter_rate {src.clutter_rate:.4g}) over "
+        "its own field of view"
+    )
     src_gate = gate_volume(setup.sensors[sid].R)
     own_gate = gate_volume(setup.sensors[PRIMARY].R)
     fov_text = ", ".join(f"{c} [{lo:.4g}, {hi:.4g}]" for c, (lo, hi) in fov.items())
@@ -283,9 +292,8 @@ def clutter(
         f"volume {own_gate:.4g} for the primary, {src_gate:.4g} for the source). Field of view "
         f"(sized around the truth: its noise-free measurements' extent plus {MARGIN_SIGMAS:g} "
         f"noise standard deviations each side): {fov_text}; clutter_rate = clutter per gate x "
-        f"{fov_and_gate(base, PRIMARY):.4g}. Source: pd {src.pd:g}, {SOURCE_PER_GATE:g} per "
-        f"gate (clutter_rate {src.clutter_rate:.4g}) over its own field of view. Lost: error "
-        f"over {base.lost_threshold_m:g} m in each of the last 10 steps. Measured: false alarms "
+        f"{fov_and_gate(base, PRIMARY):.4g}. Source: {src_text}. Lost: error over "
+        f"{base.lost_threshold_m:g} m in each of the last 10 steps. Measured: false alarms "
         "counted in that gate in the scans drawn (every run and step), with 2 Poisson SE.",
         "",
         row(["pd", "per gate", "measured (2 SE)", *(f"RMSE {f}" for f in names), "lost"]),
@@ -303,7 +311,7 @@ def clutter(
             "fov": {c: list(v) for c, v in fov.items()},
             "margin_sigmas": MARGIN_SIGMAS,
             "gate_volume": own_gate,
-            "source_detection": src.model_dump(),
+            "source_detection": None if src is None else src.model_dump(),
         },
         "cells": {},
         "lost_5pct_density": {},
