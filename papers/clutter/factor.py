@@ -25,7 +25,7 @@ clean = sys.argv[3:] == ["clean"]
 source = (1.0, 0.0) if clean else (SOURCE_PD, SOURCE_PER_GATE)
 densities = CLEAN_DENSITIES if clean else DENSITIES
 with progress_bar(runs, "clutter factor") as bar:
-    task = bar.add_task("clutter factor", total=runs * len(densities))
+    task = bar.add_task("clutter factor", total=runs)  # one sweep: each run counts once
     runner = Runner(lambda n: bar.advance(task, n), workers=2)
     path = clutter(
         Setting(runs=runs),
