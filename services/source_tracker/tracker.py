@@ -111,7 +111,7 @@ class SourceTracker:
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
                 self._step(e, ep, z)
-            self.episodes.retire(e, ep.tracker.cfg.timeline.tick(self.s.source_id, ep.steps.next_k))
+            self.episodes.retire(e, ep.tracker.timeline.tick(self.s.source_id, ep.steps.next_k))
 
     def _step(self, e: str, ep: Episode, z: Measurement) -> None:
         k, t_sensor = z.k, z.t_sensor

@@ -264,7 +264,7 @@ class Sources:
         its own period on a shared clock that is its own (the paper's); else :meth:`ahead`.
         ``timeline``: the source's view (a live source's, from the primary's published
         schedule); default the config's."""
-        timeline = timeline or self.setup.cfg.timeline
+        timeline = timeline or self.setup.timeline
         period = timeline.clocks[link[1]].period_us
         out = []
         for j, horizon in timeline.targets(link[1], k):
@@ -424,7 +424,7 @@ class Driver:
         """``collectors[i]`` hear of setup i's filters (the sources' steps go to every one)."""
         self.setups = list(setups)
         base = self.setups[0]
-        self.timeline = base.cfg.timeline
+        self.timeline = base.timeline
         hear = list(collectors) or [[] for _ in self.setups]
         everyone = [c for cs in hear for c in cs]
         self.channel: Channel = channel or Direct(ahead=self.timeline.sends_ahead)

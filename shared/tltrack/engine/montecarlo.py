@@ -285,7 +285,7 @@ def run_sweep_batch(
     sims = [[simulate(s, r) for r in runs] for s in setups]
     x0_hat = np.stack([s.x0_hat for s in sims[0]], axis=1)  # (n, B)
     truth = np.stack([s.truth for s in sims[0]], axis=1)  # (ticks + 1, B, n)
-    timeline = base.cfg.timeline
+    timeline = base.timeline
     # each operator scored at its own samples: the truth at its steps 0..K_i
     own = {i: truth[[0, *timeline.indices(i)]] for i in base.sensor_ids}
     # sensor id -> (K_i, n_z, B), per configuration (the sources' are the same in all)

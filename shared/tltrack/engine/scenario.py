@@ -37,7 +37,7 @@ def truth(setup: Setup, run: int) -> Array:
     cfg = setup.cfg
     if cfg.truth == "file":
         return file_truth(cfg)
-    timeline = cfg.timeline
+    timeline = setup.timeline
     ticks = timeline.ticks
     model = setup.motion if timeline.grid_s == cfg.Ts else setup.motion.with_period(timeline.grid_s)
     x = np.empty((ticks + 1, cfg.n_x))
@@ -59,7 +59,7 @@ def truth(setup: Setup, run: int) -> Array:
 
 def sampled(setup: Setup, x: Array, sensor_id: str) -> Array:
     """The rows of truth ``x`` at one operator's samples 1..K_i, (K_i, n_x)."""
-    return x[setup.cfg.timeline.indices(sensor_id)]
+    return x[setup.timeline.indices(sensor_id)]
 
 
 def measurements(setup: Setup, run: int, x: Array, sensor_id: str = PRIMARY) -> Array:

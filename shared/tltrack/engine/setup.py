@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import PRIMARY, Config, SensorSpec, detection_of, position_of
-from tltrack.config.timeline import US
+from tltrack.config.timeline import US, Timeline
 from tltrack.engine.pcrlb import pcrlb
 from tltrack.models.base import Layout, MeasurementModel, MotionModel
 from tltrack.models.coordinated_turn import CoordinatedTurn
@@ -142,20 +142,25 @@ class Setup:
         return motion_model(self.cfg, self.period)
 
     @cached_property
+    def timeline(self) -> Timeline:
+        """The config's timeline, built once (``Config.timeline`` builds one at each read)."""
+        return self.cfg.timeline
+
+    @cached_property
     def modes(self) -> MotionModes | None:
         """The filters' motion modes (config ``motion_modes``), or None: the scenario's model."""
         return motion_modes(self.cfg, self.period)
 
     def operator(self, sensor_id: str) -> Setup:
         """This setup as operator ``sensor_id``'s filters step: over its own period."""
-        period = self.cfg.timeline.clocks[sensor_id].period_us / US
+        period = self.timeline.clocks[sensor_id].period_us / US
         return self if period == (self.period or self.cfg.Ts) else Setup(self.cfg, period)
 
     def start(self, sensor_id: str, x0_hat: Array) -> tuple[Array, Array]:
         """Operator ``sensor_id``'s prior (x0_hat (n_x, B), P0) at its step 0, one period before
         its first sample: the initial estimate at t = 0 carried over its phase (mean through f,
         covariance F P0 F' + Q with F at the config's x0); at phase 0, (x0_hat, P0) itself."""
-        phase = self.cfg.timeline.clocks[sensor_id].phase_us / US
+        phase = self.timeline.clocks[sensor_id].phase_us / US
         if phase == 0:
             return x0_hat, self.P0
         model = self.motion.with_period(phase)

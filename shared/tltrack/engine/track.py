@@ -69,7 +69,7 @@ def check_fit(setup: Setup, scans: ScanFile) -> None:
     exactly one detection per step: refuse a file that has none or several, naming the step.
     A scan file's steps are the paper's, on one clock: refuse a config whose operators keep
     their own (:mod:`tltrack.config.timeline`)."""
-    if not setup.cfg.timeline.synchronous:
+    if not setup.timeline.synchronous:
         raise ScansDoNotFitError(
             f"{scans.path}: a scan file's step k is every sensor's, on one clock; the config "
             "gives an operator its own period_s, phase_s or clock_offset_s (the engine runs "

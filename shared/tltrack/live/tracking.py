@@ -163,8 +163,8 @@ class SourceEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
         self.cfg, self.source_id = cfg, source_id
-        self.timeline = cfg.timeline  #: built once: ``cfg.timeline`` builds it at each read
         setup, x0_hat = _start(cfg, run)
+        self.timeline = setup.timeline
         self.layout = setup.layout
         self.own = setup.sensors[source_id]
         spec = parse(f"source-{kind}")
@@ -260,8 +260,8 @@ class PrimaryEpisode:
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
         self.cfg = cfg
-        self.timeline = cfg.timeline  #: built once: ``cfg.timeline`` builds it at each read
         setup, x0_hat = _start(cfg, run)
+        self.timeline = setup.timeline
         self.layout = setup.layout
         self.own = setup.sensors[PRIMARY]
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
