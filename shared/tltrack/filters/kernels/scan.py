@@ -4,8 +4,15 @@ A scan of thousands of detections spread over a cloud's extent would cost N x M 
 but each particle's sum over detections (:mod:`tltrack.filters.association`) only needs those
 within a box of ``half`` noise standard deviations of its predicted measurement, a handful. The
 detections are bucketed once into a grid on their first two components (one for a one-component
-sensor) with cells as wide as the box's half-width, so a particle reads the 3 x 3 cells around
-its own and tests only what they hold.
+sensor), in cells ``1 / SUB`` of the box's half-width, in row-major order: the cells a particle's
+box touches in one row hold a contiguous run of detections, so a particle reads a few runs, about
+as many detections as its box holds, and the box test leaves exactly those.
+
+Each block of particles is done in two passes: the first gathers the Mahalanobis distance q of
+every (particle, detection) pair in a box into a buffer, storing each pair it reads and moving
+on only past those inside (no branch to mispredict: about a third of the pairs read are outside);
+the second turns the buffer into exp(-q/2), a branch-free loop that vectorises (see the package's
+docstring), and sums each particle's share in gathering order.
 """
 
 from __future__ import annotations
@@ -17,88 +24,97 @@ from tltrack.filters.kernels.fastmath import FMA, JIT, exp
 
 #: the grid holds at most this many cells; a finer one is coarsened
 MAX_CELLS = 1 << 20
+#: cells per half-width of a particle's box, on each grid axis
+SUB = 2
+#: particles per block of the two passes (its buffer stays in cache)
+BLOCK = 512
+_TWO_PI = 6.28318530717958647693e00
+_INV_TWO_PI = 1.0 / _TWO_PI
 
 
 @njit(**JIT)
 def _wrap(d: float) -> float:
-    return d - 2.0 * np.pi * np.floor((d + np.pi) / (2.0 * np.pi))
+    return d - _TWO_PI * np.floor((d + np.pi) * _INV_TWO_PI)
 
 
 @njit(**JIT)
-def _neighbour(i: int, t: int, cells: int, cyclic: bool) -> int:
-    """The t-th (0, 1, 2) of the cells i - 1, i, i + 1, or -1 where there is none; round the
-    circle if ``cyclic`` (an axis of fewer than 3 cells: each of its cells once)."""
+def _span(p: float, reach: float, cells: int, cyclic: bool, out: np.ndarray) -> int:
+    """The cells within ``reach`` of grid coordinate p, as at most two ranges [out[0], out[1]]
+    and [out[2], out[3]] (two when a cyclic axis wraps round); the number of ranges."""
+    p = min(max(p, -reach - 2.0), cells + reach + 2.0)  # far outside: no overflow in the cast
+    a = int(np.floor(p - reach))
+    b = int(np.floor(p + reach))
     if cyclic:
-        if cells < 3:
-            return t if t < cells else -1
-        return (i - 1 + t) % cells
-    a = i - 1 + t
-    return a if 0 <= a < cells else -1
+        if b - a + 1 >= cells:
+            out[0], out[1] = 0, cells - 1
+            return 1
+        if a < 0 or b >= cells:
+            a %= cells
+            b %= cells
+        if a <= b:
+            out[0], out[1] = a, b
+            return 1
+        out[0], out[1], out[2], out[3] = a, cells - 1, 0, b
+        return 2
+    a = max(a, 0)
+    b = min(b, cells - 1)
+    if a > b:
+        return 0
+    out[0], out[1] = a, b
+    return 1
+
+
+@njit(**FMA)
+def _exp_half(q: np.ndarray, m: int) -> None:
+    """q[:m] = exp(-q[:m] / 2), vectorised."""
+    for i in range(m):
+        q[i] = exp(-0.5 * q[i])
 
 
 @njit(**JIT)
-def _cell(p: float, cells: int, cyclic: bool) -> int:
-    """The cell of grid coordinate p; far outside the grid, clipped before the cast (its
-    neighbourhood is then empty, unless the axis goes round)."""
-    i = int(np.floor(min(max(p, -2.0), cells + 1.0)))
-    return min(max(i, 0), cells - 1) if cyclic else i
-
-
-@njit(**FMA)
-def _cell_sum(
-    Zs: np.ndarray,
-    t0: int,
-    t1: int,
-    Zx: np.ndarray,
-    n: int,
-    angular: np.ndarray,
-    Ri: np.ndarray,
-    half: np.ndarray,
-    r: np.ndarray,
-) -> float:
-    """sum of exp(-q/2) over detections t0..t1 of Zs within ``half`` of particle n, q the
-    Mahalanobis distance of the residual r (scratch, n_z)."""
-    n_z = Zs.shape[0]
-    s = 0.0
-    for t in range(t0, t1):
-        inside = True
+def _grid(
+    Z: np.ndarray, angular: np.ndarray, half: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The detections (n_z, M) in cell order, each cell's first index (``start``, one past the
+    last cell too), and the grid's origin, cell widths, cell counts and the box's reach in cells.
+    An angle's axis covers [-pi, pi] and goes round."""
+    n_z, M = Z.shape
+    d = 2 if n_z >= 2 else 1
+    lo = np.zeros(2)
+    width = np.ones(2)
+    cells = np.ones(2, dtype=np.int64)
+    for c in range(d):
+        if angular[c]:
+            lo[c] = -np.pi
+            cells[c] = max(int(_TWO_PI / (half[c] / SUB)), 1)
+            width[c] = _TWO_PI / cells[c]
+        elif M:
+            lo[c] = Z[c].min()
+            width[c] = half[c] / SUB
+            cells[c] = int((Z[c].max() - lo[c]) / width[c]) + 1
+    while cells[0] * cells[1] > MAX_CELLS:
+        for c in range(d):
+            cells[c] = (cells[c] + 1) // 2
+            width[c] = _TWO_PI / cells[c] if angular[c] else 2.0 * width[c]
+    reach = np.zeros(2)
+    for c in range(d):
+        reach[c] = half[c] / width[c]
+    key = np.empty(M, dtype=np.int64)
+    for j in range(M):
+        k0 = min(int((Z[0, j] - lo[0]) / width[0]), cells[0] - 1)
+        k1 = min(int((Z[1, j] - lo[1]) / width[1]), cells[1] - 1) if d == 2 else 0
+        key[j] = k0 * cells[1] + k1
+    order = np.argsort(key)
+    Zs = np.empty((n_z, M))
+    for t in range(M):
         for c in range(n_z):
-            v = Zs[c, t] - Zx[c, n]
-            r[c] = _wrap(v) if angular[c] else v
-            inside &= abs(r[c]) <= half[c]
-        if inside:
-            q = 0.0
-            for c in range(n_z):
-                for e in range(n_z):
-                    q += r[c] * Ri[c, e] * r[e]
-            s += exp(-0.5 * q)  # q is bounded by the box: no underflow
-    return s
-
-
-@njit(**FMA)
-def _cell_sum2(
-    Zs: np.ndarray,
-    t0: int,
-    t1: int,
-    x0: float,
-    x1: float,
-    a0: bool,
-    a1: bool,
-    Ri: np.ndarray,
-    h0: float,
-    h1: float,
-) -> float:
-    """:func:`_cell_sum` for two components, unrolled."""
-    r00, r01, r11 = Ri[0, 0], 2.0 * Ri[0, 1], Ri[1, 1]
-    s = 0.0
-    for t in range(t0, t1):
-        v0 = Zs[0, t] - x0
-        v1 = Zs[1, t] - x1
-        v0 = _wrap(v0) if a0 else v0
-        v1 = _wrap(v1) if a1 else v1
-        if abs(v0) <= h0 and abs(v1) <= h1:
-            s += np.exp(-0.5 * (v0 * v0 * r00 + v0 * v1 * r01 + v1 * v1 * r11))
-    return s
+            Zs[c, t] = Z[c, order[t]]
+    start = np.zeros(cells[0] * cells[1] + 1, dtype=np.int64)
+    for j in range(M):
+        start[key[j] + 1] += 1
+    for i in range(1, start.shape[0]):
+        start[i] += start[i - 1]
+    return Zs, start, lo, width, cells, reach
 
 
 @njit(**JIT)
@@ -115,68 +131,74 @@ def near_loglik(
     is within ``half`` in every component; -inf when none is.
 
     ``Zx`` (n_z, N) holds the particles' predicted measurements and ``Z`` (n_z, M) the
-    detections, angles in [-pi, pi]; an angle's grid axis goes round the circle. ``Ri`` is
-    R^-1, ``lognorm`` log N's constant.
+    detections, angles in [-pi, pi]. ``Ri`` is R^-1, ``lognorm`` log N's constant.
     """
     n_z, N = Zx.shape
     M = Z.shape[1]
+    two = n_z == 2  # the common layout, unrolled
     d = 2 if n_z >= 2 else 1
-    lo = np.zeros(2)
-    width = np.ones(2)
-    cells = np.ones(2, dtype=np.int64)
-    for c in range(d):
-        if angular[c]:
-            lo[c] = -np.pi
-            cells[c] = max(int(2.0 * np.pi / half[c]), 1)
-            width[c] = 2.0 * np.pi / cells[c]
-        elif M:
-            lo[c] = Z[c].min()
-            width[c] = half[c]
-            cells[c] = int((Z[c].max() - lo[c]) / width[c]) + 1
-    while cells[0] * cells[1] > MAX_CELLS:
-        for c in range(d):
-            cells[c] = (cells[c] + 1) // 2
-            width[c] = 2.0 * np.pi / cells[c] if angular[c] else 2.0 * width[c]
-    key = np.empty(M, dtype=np.int64)
-    for j in range(M):
-        k0 = min(int((Z[0, j] - lo[0]) / width[0]), cells[0] - 1)
-        k1 = min(int((Z[1, j] - lo[1]) / width[1]), cells[1] - 1) if d == 2 else 0
-        key[j] = k0 * cells[1] + k1
-    order = np.argsort(key)
-    Zs = np.empty((n_z, M))  # the detections in cell order: a cell's are contiguous
-    for t in range(M):
-        for c in range(n_z):
-            Zs[c, t] = Z[c, order[t]]
-    start = np.zeros(cells[0] * cells[1] + 1, dtype=np.int64)
-    for j in range(M):
-        start[key[j] + 1] += 1
-    for i in range(1, start.shape[0]):
-        start[i] += start[i - 1]
-    cyclic1 = d == 2 and angular[1]
+    Zs, start, lo, width, cells, reach = _grid(Z, angular, half)
+    c0, c1 = cells[0], cells[1]
+    cyclic0, cyclic1 = bool(angular[0]), d == 2 and bool(angular[1])
+    a0 = bool(angular[0])
+    a1 = bool(angular[1]) if two else False
+    h0 = half[0]
+    h1 = half[1] if two else 0.0
+    r00 = Ri[0, 0]
+    r01 = 2.0 * Ri[0, 1] if two else 0.0
+    r11 = Ri[1, 1] if two else 0.0
+    rows = np.zeros(4, dtype=np.int64)
+    cols = np.zeros(4, dtype=np.int64)
     r = np.empty(n_z)
-    for n in range(N):
-        s = 0.0
-        p0 = (Zx[0, n] - lo[0]) / width[0]
-        p1 = (Zx[1, n] - lo[1]) / width[1] if d == 2 else 0.0
-        if not (np.isfinite(p0) and np.isfinite(p1)):
-            out[n] = -np.inf
-            continue
-        i0 = _cell(p0, cells[0], angular[0])
-        i1 = _cell(p1, cells[1], cyclic1)
-        for ta in range(3):
-            a = _neighbour(i0, ta, cells[0], angular[0])
-            if a < 0:
-                continue
-            for tb in range(3):
-                b = _neighbour(i1, tb, cells[1], cyclic1)
-                if b < 0:
-                    continue
-                cell = a * cells[1] + b
-                t0, t1 = start[cell], start[cell + 1]
-                if n_z == 2:
-                    x0, x1 = Zx[0, n], Zx[1, n]
-                    a0, a1 = angular[0], angular[1]
-                    s += _cell_sum2(Zs, t0, t1, x0, x1, a0, a1, Ri, half[0], half[1])
-                else:
-                    s += _cell_sum(Zs, t0, t1, Zx, n, angular, Ri, half, r)
-        out[n] = lognorm + np.log(s) if s > 0.0 else -np.inf
+    q = np.empty(64 * BLOCK)  # grown when a block's pairs need more
+    ends = np.zeros(BLOCK + 1, dtype=np.int64)
+    for n0 in range(0, N, BLOCK):
+        n1 = min(n0 + BLOCK, N)
+        m = 0
+        for n in range(n0, n1):
+            if m + M > q.shape[0]:  # a particle reads each detection at most once
+                grown = np.empty(2 * (m + M))
+                grown[:m] = q[:m]
+                q = grown
+            x0 = Zx[0, n]
+            x1 = Zx[1, n] if d == 2 else 0.0
+            p0 = (x0 - lo[0]) / width[0]
+            p1 = (x1 - lo[1]) / width[1]
+            if np.isfinite(p0) and np.isfinite(p1):
+                nr = _span(p0, reach[0], c0, cyclic0, rows)
+                nc = _span(p1, reach[1], c1, cyclic1, cols) if d == 2 else 1
+                for ra in range(nr):
+                    for a in range(rows[2 * ra], rows[2 * ra + 1] + 1):
+                        for cb in range(nc):
+                            t0 = start[a * c1 + cols[2 * cb]]
+                            t1 = start[a * c1 + cols[2 * cb + 1] + 1]
+                            if two:
+                                for t in range(t0, t1):
+                                    v0 = Zs[0, t] - x0
+                                    v1 = Zs[1, t] - x1
+                                    v0 = _wrap(v0) if a0 else v0
+                                    v1 = _wrap(v1) if a1 else v1
+                                    # kept (m moves on) only inside the box: no branch
+                                    q[m] = v0 * v0 * r00 + v0 * v1 * r01 + v1 * v1 * r11
+                                    m += (abs(v0) <= h0) & (abs(v1) <= h1)
+                                continue
+                            for t in range(t0, t1):
+                                inside = True
+                                for c in range(n_z):
+                                    v = Zs[c, t] - Zx[c, n]
+                                    r[c] = _wrap(v) if angular[c] else v
+                                    inside &= abs(r[c]) <= half[c]
+                                if inside:
+                                    s = 0.0
+                                    for c in range(n_z):
+                                        for e in range(n_z):
+                                            s += r[c] * Ri[c, e] * r[e]
+                                    q[m] = s
+                                    m += 1
+            ends[n - n0 + 1] = m
+        _exp_half(q, m)
+        for n in range(n0, n1):
+            s = 0.0
+            for i in range(ends[n - n0], ends[n - n0 + 1]):
+                s += q[i]
+            out[n] = lognorm + np.log(s) if s > 0.0 else -np.inf
