@@ -104,53 +104,60 @@ def scan_loglik(scan: Scan, x: Array) -> Array:
     ``mask``. (Without clutter, a cloud that every detection misses by more than the gate has
     lost the target; the recovery, not the weights, is what can bring it back.)
     """
-    s = scan.sensor
-    Zx = s.h(x)  # (n_z, B, N)
-    ref = s.mean(Zx, axis=2)  # (n_z, B)
-    Ux = s.residual(Zx, ref[:, :, None])  # measurements relative to the cloud's centre
-    Uz = s.residual(scan.z, ref[:, :, None])
-    with np.errstate(invalid="ignore"):
-        extent = np.nanmax(np.abs(Ux), axis=2, initial=0.0)  # (n_z, B)
+    Zx = scan.sensor.h(x)  # (n_z, B, N)
     half = CLOUD_GATE_SIGMAS * np.sqrt(np.diagonal(scan.cov, axis1=1, axis2=2)).T  # (n_z, B)
-    near = scan.valid & (np.abs(Uz) <= (extent + half)[:, :, None]).all(axis=0)
     pd_x = scan.detection.pd_at(Zx)  # (B, N)
-    out = _log_clutter(scan, pd_x, 1.0)
-    if near.any():
-        hits = _hits_by_grid(scan, Zx, near, half)
-        if hits is None:  # every particle against every detection near the cloud
-            Zg, vg = _compact(scan, near)
-            nu = s.residual(Zg[:, :, None, :], Zx[:, :, :, None])  # (n_z, B, N, M')
-            lg = np.where(vg[:, None, :], _gaussian_logpdf(nu, scan.cov), -np.inf)
-            hits = logsumexp(lg, axis=2)
-        out = np.logaddexp(out, _log_pd(pd_x) + hits)
+    angular = getattr(scan.sensor, "angular", None)
+    if angular is None:
+        out = _loglik_by_pairs(scan, Zx, half, pd_x)
+    else:
+        out = _loglik_by_grid(scan, Zx, half, pd_x, np.asarray(angular, dtype=np.bool_))
     dead = ~np.isfinite(out).any(axis=1) | (False if scan.mask is None else ~scan.mask)
     out[dead] = 0.0
     return np.asarray(out)
 
 
-def _hits_by_grid(scan: Scan, Zx: Array, near: NDArray[np.bool_], half: Array) -> Array | None:
-    """log sum_j g(z_j | x) (B, N) over the detections within ``half`` of each particle, through
-    the grid kernel (:mod:`tltrack.filters.kernels.scan`); None for a sensor that does not
-    declare which components are angles (``angular``), whose residuals the kernel cannot know."""
-    angular = getattr(scan.sensor, "angular", None)
-    if angular is None:
-        return None
-    is_angle = np.asarray(angular, dtype=np.bool_)
-    B, N = Zx.shape[1:]
+def _loglik_by_grid(
+    scan: Scan, Zx: Array, half: Array, pd_x: Array, angular: NDArray[np.bool_]
+) -> Array:
+    """:func:`scan_loglik` through the grid kernel (:mod:`tltrack.filters.kernels.scan`), run by
+    run, for a sensor that declares which components are angles."""
+    B, N = pd_x.shape
     out = np.empty((B, N))
     Ri = np.linalg.inv(scan.cov)
-    lognorm = -0.5 * (np.linalg.slogdet(scan.cov)[1] + scan.sensor.n_z * np.log(2.0 * np.pi))
+    norm = 1.0 / np.sqrt(np.linalg.det(2.0 * np.pi * scan.cov))  # (B,)
+    floor = scan.detection.density * (1.0 - pd_x)
     for b in range(B):
-        kernel.near_loglik(
+        kernel.scan_loglik(
             np.ascontiguousarray(Zx[:, b, :]),
-            np.ascontiguousarray(scan.z[:, b, near[b]]),
-            is_angle,
+            np.ascontiguousarray(scan.z[:, b, scan.valid[b]]),
+            angular,
             np.ascontiguousarray(Ri[b]),
             np.ascontiguousarray(half[:, b]),
-            lognorm[b],
+            np.ascontiguousarray(floor[b]),
+            np.ascontiguousarray(pd_x[b] * norm[b]),
             out[b],
         )
     return out
+
+
+def _loglik_by_pairs(scan: Scan, Zx: Array, half: Array, pd_x: Array) -> Array:
+    """:func:`scan_loglik` with every particle against every detection near its cloud, for a
+    sensor that does not declare its angles (``angular``): its own ``residual`` knows them."""
+    s = scan.sensor
+    ref = s.mean(Zx, axis=2)  # (n_z, B)
+    Ux = s.residual(Zx, ref[:, :, None])  # measurements relative to the cloud's centre
+    Uz = s.residual(scan.z, ref[:, :, None])
+    with np.errstate(invalid="ignore"):
+        extent = np.nanmax(np.abs(Ux), axis=2, initial=0.0)  # (n_z, B)
+    near = scan.valid & (np.abs(Uz) <= (extent + half)[:, :, None]).all(axis=0)
+    out = _log_clutter(scan, pd_x, 1.0)
+    if near.any():
+        Zg, vg = _compact(scan, near)
+        nu = s.residual(Zg[:, :, None, :], Zx[:, :, :, None])  # (n_z, B, N, M')
+        lg = np.where(vg[:, None, :], _gaussian_logpdf(nu, scan.cov), -np.inf)
+        out = np.logaddexp(out, _log_pd(pd_x) + logsumexp(lg, axis=2))
+    return np.asarray(out)
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,8 @@ def warm_up() -> None:
             pf.gaussians()
     _warm_modes()
     for n_z in (1, 2, 3):  # the dense scans' grid, for each layout of its loop
-        x = np.zeros((n_z, 2))
-        scan.near_loglik(x, x, np.zeros(n_z, bool), np.eye(n_z), np.ones(n_z), 0.0, np.empty(2))
+        x, two = np.zeros((n_z, 2)), np.ones(2)
+        scan.scan_loglik(x, x, np.zeros(n_z, bool), np.eye(n_z), np.ones(n_z), two, two, two.copy())
     systematic_indices(np.full((1, 4), 0.25), rngs)
     spread_coordinates(np.eye(5)[None], 1e-10)  # the Monte-Carlo engine's NEES
 

@@ -1,12 +1,13 @@
-"""The detections near each particle of a dense scan, found through a grid, and their likelihood.
+"""A dense scan's likelihood for each particle of one run, through a grid of the detections.
 
 A scan of thousands of detections spread over a cloud's extent would cost N x M Gaussian terms;
 but each particle's sum over detections (:mod:`tltrack.filters.association`) only needs those
 within a box of ``half`` noise standard deviations of its predicted measurement, a handful. The
-detections are bucketed once into a grid on their first two components (one for a one-component
-sensor), in cells ``1 / SUB`` of the box's half-width, in row-major order: the cells a particle's
-box touches in one row hold a contiguous run of detections, so a particle reads a few runs, about
-as many detections as its box holds, and the box test leaves exactly those.
+scan is first cut to the detections within reach of the cloud at all. They are bucketed once
+into a grid on their first two components (one for a one-component sensor), in cells ``1 / SUB``
+of the box's half-width, in row-major order: the cells a particle's box touches in one row hold
+a contiguous run of detections, so a particle reads a few runs, about as many detections as its
+box holds, and the box test leaves exactly those.
 
 Each block of particles is done in two passes: the first gathers the Mahalanobis distance q of
 every (particle, detection) pair in a box into a buffer, storing each pair it reads and moving
@@ -72,6 +73,46 @@ def _exp_half(q: np.ndarray, m: int) -> None:
 
 
 @njit(**JIT)
+def _near_cloud(Zx: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The detections (n_z, M') within ``half`` of some particle's box: those whose residual to a
+    reference particle is within the cloud's extent about it plus ``half``, in every component
+    (on the circle too: the circular distance obeys the triangle inequality). None when no
+    particle's predicted measurement is finite."""
+    n_z, N = Zx.shape
+    ref = -1
+    for n in range(N):
+        finite = True
+        for c in range(n_z):
+            finite &= np.isfinite(Zx[c, n])
+        if finite:
+            ref = n
+            break
+    if ref < 0:
+        return Z[:, :0]
+    reach = np.zeros(n_z)
+    for n in range(N):
+        for c in range(n_z):
+            v = Zx[c, n] - Zx[c, ref]
+            v = abs(_wrap(v) if angular[c] else v)
+            if v > reach[c]:  # False for NaN: a particle with no measurement widens nothing
+                reach[c] = v
+    keep = np.empty(Z.shape[1], dtype=np.int64)
+    m = 0
+    for j in range(Z.shape[1]):
+        inside = True
+        for c in range(n_z):
+            v = Z[c, j] - Zx[c, ref]
+            inside &= abs(_wrap(v) if angular[c] else v) <= reach[c] + half[c]
+        keep[m] = j
+        m += inside
+    out = np.empty((n_z, m))
+    for t in range(m):
+        for c in range(n_z):
+            out[c, t] = Z[c, keep[t]]
+    return out
+
+
+@njit(**JIT)
 def _grid(
     Z: np.ndarray, angular: np.ndarray, half: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -118,22 +159,26 @@ def _grid(
 
 
 @njit(**JIT)
-def near_loglik(
+def scan_loglik(
     Zx: np.ndarray,
     Z: np.ndarray,
     angular: np.ndarray,
     Ri: np.ndarray,
     half: np.ndarray,
-    lognorm: float,
+    floor: np.ndarray,
+    weight: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """out[n] = log sum_j N(z_j; h(x_n), R) over the detections j whose residual to particle n
-    is within ``half`` in every component; -inf when none is.
+    """out[n] = log(floor[n] + weight[n] sum_j exp(-q_nj / 2)) over the detections j whose
+    residual to particle n is within ``half`` in every component, q_nj its Mahalanobis
+    distance; -inf where that is 0. With floor = lambda_c (1 - pd(x)) and weight = pd(x) times
+    N's constant, it is the scan's log-likelihood (:mod:`tltrack.filters.association`).
 
     ``Zx`` (n_z, N) holds the particles' predicted measurements and ``Z`` (n_z, M) the
-    detections, angles in [-pi, pi]. ``Ri`` is R^-1, ``lognorm`` log N's constant.
+    detections, angles in [-pi, pi]. ``Ri`` is R^-1.
     """
     n_z, N = Zx.shape
+    Z = _near_cloud(Zx, Z, angular, half)
     M = Z.shape[1]
     two = n_z == 2  # the common layout, unrolled
     d = 2 if n_z >= 2 else 1
@@ -201,4 +246,5 @@ def near_loglik(
             s = 0.0
             for i in range(ends[n - n0], ends[n - n0 + 1]):
                 s += q[i]
-            out[n] = lognorm + np.log(s) if s > 0.0 else -np.inf
+            v = floor[n] + weight[n] * s
+            out[n] = np.log(v) if v > 0.0 else -np.inf
