@@ -128,6 +128,21 @@ def test_the_clouds_gate_drops_only_detections_that_cannot_matter(radar: Setup) 
     got = scan_loglik(scan, x)[0]
     brute = _brute(own.model, own.R, detection, Z, x[:, 0, :])  # every detection, no gate
     assert np.allclose(got, brute, rtol=1e-9, atol=1e-9)
+    # a sensor that does not declare its angles takes the NumPy path, to the same numbers
+    undeclared = Scan.pack(_Undeclared(own.model), [Z], own.R, detection)
+    assert np.allclose(scan_loglik(undeclared, x)[0], brute, rtol=1e-9, atol=1e-9)
+
+
+class _Undeclared:
+    """A sensor model without its ``angular`` declaration (a plugin may leave it out)."""
+
+    def __init__(self, model: object) -> None:
+        self._model = model
+
+    def __getattr__(self, name: str) -> object:
+        if name == "angular":
+            raise AttributeError(name)
+        return getattr(self._model, name)
 
 
 def _ukf(radar: Setup) -> UnscentedKalmanFilter:
