@@ -6,7 +6,10 @@
   resampling's gather;
 - :mod:`~.range_bearing`: range-bearing log-likelihoods and predicted-observation moments;
 - :mod:`~.moments`: the mean and covariance of a cloud (weighted by offspring counts or not);
-- :mod:`~.resample`: normalising log-weights and resampling systematically, run by run.
+- :mod:`~.resample`: normalising log-weights and resampling systematically, run by run;
+- :mod:`~.auxiliary`: the auxiliary particle filter's look-ahead and its two weighting stages;
+- :mod:`~.scan`: a dense scan's likelihood, each particle against the detections near it
+  through a grid.
 
 Which model takes which kernel is decided in one place, :mod:`tltrack.filters.fastpath`.
 
