@@ -35,6 +35,7 @@ _INV_TWO_PI = 1.0 / _TWO_PI
 
 @njit(**JIT)
 def _wrap(d: float) -> float:
+    """An angle's difference d, into [-pi, pi)."""
     return d - _TWO_PI * np.floor((d + np.pi) * _INV_TWO_PI)
 
 
@@ -76,8 +77,8 @@ def _exp_half(q: np.ndarray, m: int) -> None:
 def _near_cloud(Zx: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.ndarray) -> np.ndarray:
     """The detections (n_z, M') within ``half`` of some particle's box: those whose residual to a
     reference particle is within the cloud's extent about it plus ``half``, in every component
-    (on the circle too: the circular distance obeys the triangle inequality). None when no
-    particle's predicted measurement is finite."""
+    (on the circle too: the circular distance obeys the triangle inequality). None of them when
+    no particle's predicted measurement is finite."""
     n_z, N = Zx.shape
     ref = -1
     for n in range(N):
