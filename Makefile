@@ -7,10 +7,15 @@ PYTEST  := $(BIN)/pytest
 
 .PHONY: demo test check lint warm bench reproduce zenohd clean docs base-image
 
+## uv installs the venv: pip's resolution, with parallel downloads, in seconds rather than the
+## minute or two pip takes (docs/contributing.md, "Dependencies, and why each is there").
+UV_VERSION := 0.13.9
+
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[dev,docs,stonesoup,cli]'
+	$(BIN)/pip install --quiet --disable-pip-version-check uv==$(UV_VERSION)
+	$(BIN)/uv pip install --quiet --python $(BIN)/python --upgrade-package pip pip \
+	  -e '.[dev,docs,stonesoup,cli]'
 	touch $(STAMP)
 
 ## The live dual tracker over loopback Zenoh: a router per operator and the services, one episode, the scorer's summary.

@@ -94,6 +94,8 @@ run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
 # ---- papers/clutter: the lost share against the false alarms in the gate (N = 1000: at the
 # study's N = 6000 one process needs about 16 GB)
 run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTTER"
+# ... at the study's own N = 6000 (its default), in a folder of its own
+run "$CLUTTER" clutter-6000-100 study clutter --runs 100 --out "$CLUTTER/n6000"
 # The headline's factor at the study's N = 6000, on a grid below the study's first point.
 run "$CLUTTER" factor-200 --script papers/clutter/factor.py 200 "$CLUTTER/factor"
 # ... with the paper's clean sensor at the source, and its gates against R's
