@@ -108,7 +108,7 @@ def scan_loglik(scan: Scan, x: Array) -> Array:
     half = CLOUD_GATE_SIGMAS * np.sqrt(np.diagonal(scan.cov, axis1=1, axis2=2)).T  # (n_z, B)
     pd_x = scan.detection.pd_at(Zx)  # (B, N)
     angular = getattr(scan.sensor, "angular", None)
-    if angular is None:
+    if angular is None or scan.sensor.n_z > 3:
         out = _loglik_by_pairs(scan, Zx, half, pd_x)
     else:
         out = _loglik_by_grid(scan, Zx, half, pd_x, np.asarray(angular, dtype=np.bool_))
@@ -121,7 +121,7 @@ def _loglik_by_grid(
     scan: Scan, Zx: Array, half: Array, pd_x: Array, angular: NDArray[np.bool_]
 ) -> Array:
     """:func:`scan_loglik` through the grid kernel (:mod:`tltrack.filters.kernels.scan`), run by
-    run, for a sensor that declares which components are angles."""
+    run, for a sensor of at most three components that declares which are angles."""
     B, N = pd_x.shape
     out = np.empty((B, N))
     Ri = np.linalg.inv(scan.cov)
@@ -143,7 +143,8 @@ def _loglik_by_grid(
 
 def _loglik_by_pairs(scan: Scan, Zx: Array, half: Array, pd_x: Array) -> Array:
     """:func:`scan_loglik` with every particle against every detection near its cloud, for a
-    sensor that does not declare its angles (``angular``): its own ``residual`` knows them."""
+    sensor that does not declare its angles (``angular``; its own ``residual`` knows them) or
+    has more than three components."""
     s = scan.sensor
     ref = s.mean(Zx, axis=2)  # (n_z, B)
     Ux = s.residual(Zx, ref[:, :, None])  # measurements relative to the cloud's centre

@@ -1,19 +1,20 @@
-"""A dense scan's likelihood for each particle of one run, through a grid of the detections.
+"""A dense scan's likelihood for each particle of one run, through a grid of the particles.
 
 A scan of thousands of detections spread over a cloud's extent would cost N x M Gaussian terms;
 but each particle's sum over detections (:mod:`tltrack.filters.association`) only needs those
 within a box of ``half`` noise standard deviations of its predicted measurement, a handful. The
-scan is first cut to the detections within reach of the cloud at all. They are bucketed once
-into a grid on their first two components (one for a one-component sensor), in cells ``1 / SUB``
-of the box's half-width, in row-major order: the cells a particle's box touches in one row hold
-a contiguous run of detections, so a particle reads a few runs, about as many detections as its
-box holds, and the box test leaves exactly those.
+scan is first cut to the detections within reach of the cloud at all. The particles are then
+sorted (a counting sort) into a grid on their predicted measurements' first two components (one
+for a one-component sensor), in cells ``1 / SUB`` of the box's half-width, row-major: the cells
+that a detection's box touches in one row hold a contiguous run of particles. Each detection adds
+exp(-q/2) to every particle of those runs that has it inside its box (q the Mahalanobis
+distance), in a branch-free loop over the run that vectorises (see the package's docstring);
+the runs hold about 1.5 times the particles in the box. A cloud that keeps its track is dense,
+its runs long; a lost one is spread thin, and its runs short.
 
-Each block of particles is done in two passes: the first gathers the Mahalanobis distance q of
-every (particle, detection) pair in a box into a buffer, storing each pair it reads and moving
-on only past those inside (no branch to mispredict: about a third of the pairs read are outside);
-the second turns the buffer into exp(-q/2), a branch-free loop that vectorises (see the package's
-docstring), and sums each particle's share in gathering order.
+Going detection by detection rather than particle by particle is what lets the loop vectorise:
+a particle has a handful of detections near it, a detection has the cloud's particles near it.
+Each particle's sum is in the detections' order, whatever the grid.
 """
 
 from __future__ import annotations
@@ -27,8 +28,6 @@ from tltrack.filters.kernels.fastmath import FMA, JIT, exp
 MAX_CELLS = 1 << 20
 #: cells per half-width of a particle's box, on each grid axis
 SUB = 2
-#: particles per block of the two passes (its buffer stays in cache)
-BLOCK = 512
 _TWO_PI = 6.28318530717958647693e00
 _INV_TWO_PI = 1.0 / _TWO_PI
 
@@ -64,13 +63,6 @@ def _span(p: float, reach: float, cells: int, cyclic: bool, out: np.ndarray) -> 
         return 0
     out[0], out[1] = a, b
     return 1
-
-
-@njit(**FMA)
-def _exp_half(q: np.ndarray, m: int) -> None:
-    """q[:m] = exp(-q[:m] / 2), vectorised."""
-    for i in range(m):
-        q[i] = exp(-0.5 * q[i])
 
 
 @njit(**JIT)
@@ -115,13 +107,23 @@ def _near_cloud(Zx: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.nda
 
 @njit(**JIT)
 def _grid(
-    Z: np.ndarray, angular: np.ndarray, half: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The detections (n_z, M) in cell order, each cell's first index (``start``, one past the
-    last cell too), and the grid's origin, cell widths, cell counts and the box's reach in cells.
-    An angle's axis covers [-pi, pi] and goes round."""
-    n_z, M = Z.shape
+    Zx: np.ndarray, angular: np.ndarray, half: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The particles with a finite predicted measurement, in cell order: their measurements
+    ``P`` (at least 2 rows, a one-component sensor's second 0) and indices ``order``; each
+    cell's first position (``start``, one past the last cell too); the grid's origin, cell
+    widths, cell counts and a box's reach in cells. An angle's axis covers [-pi, pi] and goes
+    round."""
+    n_z, N = Zx.shape
     d = 2 if n_z >= 2 else 1
+    finite = np.empty(N, dtype=np.int64)
+    n_f = 0
+    for n in range(N):
+        ok = True
+        for c in range(n_z):
+            ok &= np.isfinite(Zx[c, n])
+        finite[n_f] = n
+        n_f += ok
     lo = np.zeros(2)
     width = np.ones(2)
     cells = np.ones(2, dtype=np.int64)
@@ -130,10 +132,13 @@ def _grid(
             lo[c] = -np.pi
             cells[c] = max(int(_TWO_PI / (half[c] / SUB)), 1)
             width[c] = _TWO_PI / cells[c]
-        elif M:
-            lo[c] = Z[c].min()
+        elif n_f:
+            lo[c], hi = np.inf, -np.inf
+            for t in range(n_f):
+                lo[c] = min(lo[c], Zx[c, finite[t]])
+                hi = max(hi, Zx[c, finite[t]])
             width[c] = half[c] / SUB
-            cells[c] = int((Z[c].max() - lo[c]) / width[c]) + 1
+            cells[c] = int((hi - lo[c]) / width[c]) + 1
     while cells[0] * cells[1] > MAX_CELLS:
         for c in range(d):
             cells[c] = (cells[c] + 1) // 2
@@ -141,22 +146,76 @@ def _grid(
     reach = np.zeros(2)
     for c in range(d):
         reach[c] = half[c] / width[c]
-    key = np.empty(M, dtype=np.int64)
-    for j in range(M):
-        k0 = min(int((Z[0, j] - lo[0]) / width[0]), cells[0] - 1)
-        k1 = min(int((Z[1, j] - lo[1]) / width[1]), cells[1] - 1) if d == 2 else 0
-        key[j] = k0 * cells[1] + k1
-    order = np.argsort(key)
-    Zs = np.empty((n_z, M))
-    for t in range(M):
-        for c in range(n_z):
-            Zs[c, t] = Z[c, order[t]]
+    key = np.empty(n_f, dtype=np.int64)
     start = np.zeros(cells[0] * cells[1] + 1, dtype=np.int64)
-    for j in range(M):
-        start[key[j] + 1] += 1
+    for t in range(n_f):
+        n = finite[t]
+        k0 = min(int((Zx[0, n] - lo[0]) / width[0]), cells[0] - 1)
+        k1 = min(int((Zx[1, n] - lo[1]) / width[1]), cells[1] - 1) if d == 2 else 0
+        key[t] = k0 * cells[1] + k1
+        start[key[t] + 1] += 1
     for i in range(1, start.shape[0]):
         start[i] += start[i - 1]
-    return Zs, start, lo, width, cells, reach
+    fill = start[:-1].copy()
+    order = np.empty(n_f, dtype=np.int64)
+    for t in range(n_f):
+        order[fill[key[t]]] = finite[t]
+        fill[key[t]] += 1
+    P = np.zeros((max(n_z, 2), n_f))
+    for t in range(n_f):
+        for c in range(n_z):
+            P[c, t] = Zx[c, order[t]]
+    return P, order, start, lo, width, cells, reach
+
+
+@njit(**FMA)
+def _add2(
+    p0: np.ndarray,
+    p1: np.ndarray,
+    acc: np.ndarray,
+    z: np.ndarray,
+    angular: np.ndarray,
+    half: np.ndarray,
+    Ri: np.ndarray,
+) -> None:
+    """acc += exp(-q/2) for the particles (p0, p1) that have the two-component detection z in
+    their box, q its Mahalanobis distance; the others get 0."""
+    z0, z1, a0, a1, h0, h1 = z[0], z[1], angular[0], angular[1], half[0], half[1]
+    r00, r01, r11 = Ri[0, 0], 2.0 * Ri[0, 1], Ri[1, 1]
+    for i in range(acc.shape[0]):
+        v0 = z0 - p0[i]
+        v1 = z1 - p1[i]
+        v0 = _wrap(v0) if a0 else v0
+        v1 = _wrap(v1) if a1 else v1
+        e = exp(-0.5 * (v0 * v0 * r00 + v0 * v1 * r01 + v1 * v1 * r11))
+        acc[i] += e if (abs(v0) <= h0) & (abs(v1) <= h1) else 0.0
+
+
+@njit(**FMA)
+def _add3(
+    p0: np.ndarray,
+    p1: np.ndarray,
+    p2: np.ndarray,
+    acc: np.ndarray,
+    z: np.ndarray,
+    angular: np.ndarray,
+    half: np.ndarray,
+    Ri: np.ndarray,
+) -> None:
+    """:func:`_add2` for three components."""
+    z0, z1, z2, a0, a1, a2 = z[0], z[1], z[2], angular[0], angular[1], angular[2]
+    h0, h1, h2 = half[0], half[1], half[2]
+    r00, r11, r22 = Ri[0, 0], Ri[1, 1], Ri[2, 2]
+    r01, r02, r12 = 2.0 * Ri[0, 1], 2.0 * Ri[0, 2], 2.0 * Ri[1, 2]
+    for i in range(acc.shape[0]):
+        v0 = z0 - p0[i]
+        v1 = z1 - p1[i]
+        v2 = z2 - p2[i]
+        v0 = _wrap(v0) if a0 else v0
+        v1 = _wrap(v1) if a1 else v1
+        v2 = _wrap(v2) if a2 else v2
+        q = v0 * (v0 * r00 + v1 * r01 + v2 * r02) + v1 * (v1 * r11 + v2 * r12) + v2 * v2 * r22
+        acc[i] += exp(-0.5 * q) if (abs(v0) <= h0) & (abs(v1) <= h1) & (abs(v2) <= h2) else 0.0
 
 
 @njit(**JIT)
@@ -175,77 +234,42 @@ def scan_loglik(
     distance; -inf where that is 0. With floor = lambda_c (1 - pd(x)) and weight = pd(x) times
     N's constant, it is the scan's log-likelihood (:mod:`tltrack.filters.association`).
 
-    ``Zx`` (n_z, N) holds the particles' predicted measurements and ``Z`` (n_z, M) the
+    ``Zx`` (n_z, N), n_z <= 3, holds the particles' predicted measurements and ``Z`` (n_z, M) the
     detections, angles in [-pi, pi]. ``Ri`` is R^-1.
     """
     n_z, N = Zx.shape
     Z = _near_cloud(Zx, Z, angular, half)
-    M = Z.shape[1]
-    two = n_z == 2  # the common layout, unrolled
-    d = 2 if n_z >= 2 else 1
-    Zs, start, lo, width, cells, reach = _grid(Z, angular, half)
-    c0, c1 = cells[0], cells[1]
-    cyclic0, cyclic1 = bool(angular[0]), d == 2 and bool(angular[1])
-    a0 = bool(angular[0])
-    a1 = bool(angular[1]) if two else False
-    h0 = half[0]
-    h1 = half[1] if two else 0.0
-    r00 = Ri[0, 0]
-    r01 = 2.0 * Ri[0, 1] if two else 0.0
-    r11 = Ri[1, 1] if two else 0.0
+    P, order, start, lo, width, cells, reach = _grid(Zx, angular, half)
+    # a one-component sensor's second component: 0 for particles and detections, never outside
+    z = np.zeros(max(n_z, 2))
+    ang = np.zeros(max(n_z, 2), dtype=np.bool_)
+    ang[:n_z] = angular
+    box = np.full(max(n_z, 2), np.inf)
+    box[:n_z] = half
+    Rq = np.zeros((max(n_z, 2), max(n_z, 2)))
+    Rq[:n_z, :n_z] = Ri
+    acc = np.zeros(order.shape[0])
     rows = np.zeros(4, dtype=np.int64)
     cols = np.zeros(4, dtype=np.int64)
-    r = np.empty(n_z)
-    q = np.empty(64 * BLOCK)  # grown when a block's pairs need more
-    ends = np.zeros(BLOCK + 1, dtype=np.int64)
-    for n0 in range(0, N, BLOCK):
-        n1 = min(n0 + BLOCK, N)
-        m = 0
-        for n in range(n0, n1):
-            if m + M > q.shape[0]:  # a particle reads each detection at most once
-                grown = np.empty(2 * (m + M))
-                grown[:m] = q[:m]
-                q = grown
-            x0 = Zx[0, n]
-            x1 = Zx[1, n] if d == 2 else 0.0
-            p0 = (x0 - lo[0]) / width[0]
-            p1 = (x1 - lo[1]) / width[1]
-            if np.isfinite(p0) and np.isfinite(p1):
-                nr = _span(p0, reach[0], c0, cyclic0, rows)
-                nc = _span(p1, reach[1], c1, cyclic1, cols) if d == 2 else 1
-                for ra in range(nr):
-                    for a in range(rows[2 * ra], rows[2 * ra + 1] + 1):
-                        for cb in range(nc):
-                            t0 = start[a * c1 + cols[2 * cb]]
-                            t1 = start[a * c1 + cols[2 * cb + 1] + 1]
-                            if two:
-                                for t in range(t0, t1):
-                                    v0 = Zs[0, t] - x0
-                                    v1 = Zs[1, t] - x1
-                                    v0 = _wrap(v0) if a0 else v0
-                                    v1 = _wrap(v1) if a1 else v1
-                                    # kept (m moves on) only inside the box: no branch
-                                    q[m] = v0 * v0 * r00 + v0 * v1 * r01 + v1 * v1 * r11
-                                    m += (abs(v0) <= h0) & (abs(v1) <= h1)
-                                continue
-                            for t in range(t0, t1):
-                                inside = True
-                                for c in range(n_z):
-                                    v = Zs[c, t] - Zx[c, n]
-                                    r[c] = _wrap(v) if angular[c] else v
-                                    inside &= abs(r[c]) <= half[c]
-                                if inside:
-                                    s = 0.0
-                                    for c in range(n_z):
-                                        for e in range(n_z):
-                                            s += r[c] * Ri[c, e] * r[e]
-                                    q[m] = s
-                                    m += 1
-            ends[n - n0 + 1] = m
-        _exp_half(q, m)
-        for n in range(n0, n1):
-            s = 0.0
-            for i in range(ends[n - n0], ends[n - n0 + 1]):
-                s += q[i]
-            v = floor[n] + weight[n] * s
-            out[n] = np.log(v) if v > 0.0 else -np.inf
+    c1 = cells[1]
+    for j in range(Z.shape[1]):
+        z[:n_z] = Z[:, j]
+        nr = _span((z[0] - lo[0]) / width[0], reach[0], cells[0], ang[0], rows)
+        nc = _span((z[1] - lo[1]) / width[1], reach[1], c1, ang[1], cols) if n_z >= 2 else 1
+        for ra in range(nr):
+            for a in range(rows[2 * ra], rows[2 * ra + 1] + 1):
+                for cb in range(nc):
+                    i0 = start[a * c1 + cols[2 * cb]]
+                    i1 = start[a * c1 + cols[2 * cb + 1] + 1]
+                    if i1 == i0:
+                        continue
+                    if n_z == 3:
+                        _add3(P[0, i0:i1], P[1, i0:i1], P[2, i0:i1], acc[i0:i1], z, ang, box, Rq)
+                    else:
+                        _add2(P[0, i0:i1], P[1, i0:i1], acc[i0:i1], z, ang, box, Rq)
+    for n in range(N):  # no finite measurement: the clutter term alone
+        out[n] = np.log(floor[n]) if floor[n] > 0.0 else -np.inf
+    for t in range(order.shape[0]):
+        n = order[t]
+        v = floor[n] + weight[n] * acc[t]
+        out[n] = np.log(v) if v > 0.0 else -np.inf
