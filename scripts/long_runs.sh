@@ -91,8 +91,7 @@ run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
 run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
     --json "$MANOEUVRES/modes_step.json"
 
-# ---- papers/clutter: the lost share against the false alarms in the gate (N = 1000: at the
-# study's N = 6000 one process needs about 16 GB)
+# ---- papers/clutter: the lost share against the false alarms in the gate, at N = 1000
 run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTTER"
 # ... at the study's own N = 6000 (its default), in a folder of its own
 run "$CLUTTER" clutter-6000-100 study clutter --runs 100 --out "$CLUTTER/n6000"
