@@ -14,8 +14,9 @@ and pd = 1 give g(z | x), the paper's likelihood.
   ``CLOUD_GATE_SIGMAS`` noise standard deviations, in any component, from a particle's predicted
   measurement adds less than exp(-CLOUD_GATE_SIGMAS^2 / 2) of a hit to that particle's sum and is
   left out of it, so P_G = 1. The scan is gated once per cloud, by the cloud's extent; then each
-  particle reads the detections near it through a grid (:mod:`tltrack.filters.kernels.scan`), so
-  a scan of thousands of detections costs little more than the few near each particle.
+  detection adds to the particles near it, found through a grid of the particles
+  (:mod:`tltrack.filters.kernels.scan`), so a scan of thousands of detections costs little more
+  than the few near each particle.
 - Gaussian filters (:func:`associate`) use probabilistic data association (Bar-Shalom & Tse
   1975; Bar-Shalom, Daum & Huang 2009, eqs. 37-44): the detections inside the gate
   nu' S^-1 nu <= chi2_{n_z}(P_G) of the predicted measurement N(z_hat, S) each get a probability
