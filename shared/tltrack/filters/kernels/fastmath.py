@@ -23,6 +23,8 @@ SUM: dict[str, Any] = {**JIT, "fastmath": {"reassoc", "contract"}}
 
 #: Beyond this |x| the 3-part Cody-Waite reduction of sin/cos is not trusted: libm is used instead.
 TRIG_MAX = 1.0e5
+#: 2 pi to the last bit
+TWO_PI = 6.28318530717958647693e00
 
 
 # --------------------------------------------------------------------------------------------

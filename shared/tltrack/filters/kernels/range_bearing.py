@@ -7,12 +7,11 @@ import math
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, SUM, atan2, exp
+from tltrack.filters.kernels.fastmath import FMA, SUM, TWO_PI, atan2, exp
 from tltrack.filters.kernels.resample import resample_run
 
 #: Per-observation constants of one run, see :func:`_rb_constants`.
 _NC = 9
-_TWO_PI = 6.28318530717958647693e00
 
 
 @njit(**FMA)
@@ -62,12 +61,12 @@ def _rb_pass2(
         th = atan2(dy, dx)
         d0 = zr - r
         d1 = zb - th  # in [-2 pi, 2 pi]: one turn at most to wrap into (-pi, pi]
-        d1 = d1 - _TWO_PI if d1 > np.pi else d1
-        d1 = d1 + _TWO_PI if d1 <= -np.pi else d1
+        d1 = d1 - TWO_PI if d1 > np.pi else d1
+        d1 = d1 + TWO_PI if d1 <= -np.pi else d1
         e0 = zr2 - r
         e1 = zb2 - th
-        e1 = e1 - _TWO_PI if e1 > np.pi else e1
-        e1 = e1 + _TWO_PI if e1 <= -np.pi else e1
+        e1 = e1 - TWO_PI if e1 > np.pi else e1
+        e1 = e1 + TWO_PI if e1 <= -np.pi else e1
         rho = (pa * d0 * d0 + pb * d0 * d1 + pc * d1 * d1) + (
             pa2 * e0 * e0 + pb2 * e0 * e1 + pc2 * e1 * e1
         )
