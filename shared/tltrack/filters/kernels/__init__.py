@@ -8,8 +8,8 @@
 - :mod:`~.moments`: the mean and covariance of a cloud (weighted by offspring counts or not);
 - :mod:`~.resample`: normalising log-weights and resampling systematically, run by run;
 - :mod:`~.auxiliary`: the auxiliary particle filter's look-ahead and its two weighting stages;
-- :mod:`~.scan`: a dense scan's likelihood, each particle against the detections near it
-  through a grid.
+- :mod:`~.scan`: a dense scan's likelihood, each detection added to the particles near it,
+  found through a grid of the particles.
 
 Which model takes which kernel is decided in one place, :mod:`tltrack.filters.fastpath`.
 

@@ -22,20 +22,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from tltrack.filters.kernels.fastmath import FMA, JIT, exp
+from tltrack.filters.kernels.fastmath import FMA, JIT, TWO_PI, exp
 
 #: the grid holds at most this many cells; a finer one is coarsened
 MAX_CELLS = 1 << 20
 #: cells per half-width of a particle's box, on each grid axis
 SUB = 2
-_TWO_PI = 6.28318530717958647693e00
-_INV_TWO_PI = 1.0 / _TWO_PI
+_INV_TWO_PI = 1.0 / TWO_PI
 
 
 @njit(**JIT)
 def _wrap(d: float) -> float:
     """An angle's difference d, into [-pi, pi)."""
-    return d - _TWO_PI * np.floor((d + np.pi) * _INV_TWO_PI)
+    return d - TWO_PI * np.floor((d + np.pi) * _INV_TWO_PI)
 
 
 @njit(**JIT)
@@ -66,35 +65,26 @@ def _span(p: float, reach: float, cells: int, cyclic: bool, out: np.ndarray) -> 
 
 
 @njit(**JIT)
-def _near_cloud(Zx: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.ndarray) -> np.ndarray:
+def _near_cloud(P: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.ndarray) -> np.ndarray:
     """The detections (n_z, M') within ``half`` of some particle's box: those whose residual to a
-    reference particle is within the cloud's extent about it plus ``half``, in every component
-    (on the circle too: the circular distance obeys the triangle inequality). None of them when
-    no particle's predicted measurement is finite."""
-    n_z, N = Zx.shape
-    ref = -1
-    for n in range(N):
-        finite = True
-        for c in range(n_z):
-            finite &= np.isfinite(Zx[c, n])
-        if finite:
-            ref = n
-            break
-    if ref < 0:
+    reference particle (the first) is within the cloud's extent about it plus ``half``, in every
+    component (on the circle too: the circular distance obeys the triangle inequality). ``P``
+    (n_z, N') holds the predicted measurements of the particles that have one (finite); none of
+    the detections when no particle has."""
+    n_z, N = Z.shape[0], P.shape[1]
+    if N == 0:
         return Z[:, :0]
     reach = np.zeros(n_z)
     for n in range(N):
         for c in range(n_z):
-            v = Zx[c, n] - Zx[c, ref]
-            v = abs(_wrap(v) if angular[c] else v)
-            if v > reach[c]:  # False for NaN: a particle with no measurement widens nothing
-                reach[c] = v
+            v = P[c, n] - P[c, 0]
+            reach[c] = max(reach[c], abs(_wrap(v) if angular[c] else v))
     keep = np.empty(Z.shape[1], dtype=np.int64)
     m = 0
     for j in range(Z.shape[1]):
         inside = True
         for c in range(n_z):
-            v = Z[c, j] - Zx[c, ref]
+            v = Z[c, j] - P[c, 0]
             inside &= abs(_wrap(v) if angular[c] else v) <= reach[c] + half[c]
         keep[m] = j
         m += inside
@@ -130,8 +120,8 @@ def _grid(
     for c in range(d):
         if angular[c]:
             lo[c] = -np.pi
-            cells[c] = max(int(_TWO_PI / (half[c] / SUB)), 1)
-            width[c] = _TWO_PI / cells[c]
+            cells[c] = max(int(TWO_PI / (half[c] / SUB)), 1)
+            width[c] = TWO_PI / cells[c]
         elif n_f:
             lo[c], hi = np.inf, -np.inf
             for t in range(n_f):
@@ -142,7 +132,7 @@ def _grid(
     while cells[0] * cells[1] > MAX_CELLS:
         for c in range(d):
             cells[c] = (cells[c] + 1) // 2
-            width[c] = _TWO_PI / cells[c] if angular[c] else 2.0 * width[c]
+            width[c] = TWO_PI / cells[c] if angular[c] else 2.0 * width[c]
     reach = np.zeros(2)
     for c in range(d):
         reach[c] = half[c] / width[c]
@@ -238,8 +228,8 @@ def scan_loglik(
     detections, angles in [-pi, pi]. ``Ri`` is R^-1.
     """
     n_z, N = Zx.shape
-    Z = _near_cloud(Zx, Z, angular, half)
     P, order, start, lo, width, cells, reach = _grid(Zx, angular, half)
+    Z = _near_cloud(P[:n_z], Z, angular, half)
     # a one-component sensor's second component: 0 for particles and detections, never outside
     z = np.zeros(max(n_z, 2))
     ang = np.zeros(max(n_z, 2), dtype=np.bool_)
@@ -267,9 +257,9 @@ def scan_loglik(
                         _add3(P[0, i0:i1], P[1, i0:i1], P[2, i0:i1], acc[i0:i1], z, ang, box, Rq)
                     else:
                         _add2(P[0, i0:i1], P[1, i0:i1], acc[i0:i1], z, ang, box, Rq)
-    for n in range(N):  # no finite measurement: the clutter term alone
-        out[n] = np.log(floor[n]) if floor[n] > 0.0 else -np.inf
+    hits = np.zeros(N)  # a particle with no finite measurement: the clutter term alone
     for t in range(order.shape[0]):
-        n = order[t]
-        v = floor[n] + weight[n] * acc[t]
+        hits[order[t]] = acc[t]
+    for n in range(N):
+        v = floor[n] + weight[n] * hits[n]
         out[n] = np.log(v) if v > 0.0 else -np.inf
