@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from scipy.linalg import expm
 
 TargetClassName = Literal["ship", "aircraft"]
 
@@ -53,6 +52,8 @@ def transition(rates: Sequence[Sequence[float]], dt: float) -> list[list[float]]
 @functools.lru_cache(maxsize=4096)
 def _transition(rates: tuple[tuple[float, ...], ...], dt: float) -> tuple[tuple[float, ...], ...]:
     # cached: a fit asks for the same few periods at every report of every likelihood evaluation
+    from scipy.linalg import expm  # on first use: every service loads this module
+
     G = np.array(rates)
     np.fill_diagonal(G, 0.0)
     G -= np.diag(G.sum(axis=1))

@@ -108,7 +108,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.interpolate import CubicSpline
 
 from tltrack.config.schema import Config
 from tltrack.models.angles import wrap_angle
@@ -424,6 +423,8 @@ def resample(
         )
     tk = np.minimum(np.arange(K + 1) * Ts, duration)  # the last sample never extrapolates
     if method == "cubic":
+        from scipy.interpolate import CubicSpline  # on first use: every service loads this module
+
         return np.asarray(CubicSpline(rel, points, axis=0, bc_type="not-a-knot")(tk))
     if method == "linear":
         return np.stack([np.interp(tk, rel, points[:, j]) for j in range(2)], axis=1)

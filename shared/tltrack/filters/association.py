@@ -26,13 +26,13 @@ and pd = 1 give g(z | x), the paper's likelihood.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.filters import chi2
 from tltrack.filters.kernels import scan as kernel
 from tltrack.models.observation import Observation
 from tltrack.models.scan import Scan
@@ -44,19 +44,11 @@ Array = NDArray[np.float64]
 CLOUD_GATE_SIGMAS = 6.0
 
 
-@functools.cache
-def gate_threshold(probability: float, n_z: int) -> float:
-    """gamma with P(chi2_{n_z} <= gamma) = probability."""
-    from scipy.stats import chi2  # on first use: every service imports this module, few gate
-
-    return float(chi2.ppf(probability, n_z))
-
-
 def gate_volume(R: Array, probability: float = 0.99) -> float:
     """The volume of {nu : nu' R^-1 nu <= chi2_{n_z}(probability)}: an ellipsoid of radius
     sqrt(gamma) in R's metric (pi gamma sqrt(det R) for n_z = 2)."""
     n = R.shape[0]
-    gamma = gate_threshold(probability, n)
+    gamma = chi2.quantile(probability, n)
     unit_ball = math.pi ** (n / 2) / math.gamma(n / 2 + 1)
     return float(unit_ball * gamma ** (n / 2) * math.sqrt(np.linalg.det(R)))
 
@@ -203,7 +195,7 @@ def associate(scan: Scan, predicted: Observation) -> Association:
     nu = s.residual(scan.z, zhat[:, :, None])  # (n_z, B, M)
     lg = _gaussian_logpdf(nu, S)  # (B, M)
     d2 = -2.0 * lg - (np.linalg.slogdet(S)[1] + s.n_z * np.log(2.0 * np.pi))[:, None]
-    gated = scan.valid & (d2 <= gate_threshold(P_G, s.n_z))
+    gated = scan.valid & (d2 <= chi2.quantile(P_G, s.n_z))
     pd_b = scan.detection.pd_at(zhat)  # (B,)
     hits = np.where(gated, _log_pd(pd_b)[:, None] + lg, -np.inf)
     terms = np.concatenate([_log_clutter(scan, pd_b, P_G)[:, None], hits], axis=1)

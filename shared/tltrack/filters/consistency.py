@@ -20,8 +20,8 @@ from collections import deque
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
+from tltrack.filters import chi2
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
@@ -49,7 +49,7 @@ def nis(z: Observation, predicted: Observation) -> Array:
 @functools.cache
 def band(n_z: int, window: int = WINDOW) -> tuple[float, float]:
     """The 99% band of a window's mean NIS for measurements of n_z components."""
-    lo, hi = (float(chi2.ppf(q, window * n_z)) / window for q in TAILS)
+    lo, hi = (chi2.quantile(q, window * n_z) / window for q in TAILS)
     return lo, hi
 
 

@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
+from tltrack.filters import chi2
 from tltrack.models.base import MeasurementModel, PositionFix
 from tltrack.models.observation import Observation
 
@@ -134,7 +134,9 @@ class TransferPolicy:
     def _consistent(w: Evidence, n: int, p: float) -> NDArray[np.bool_]:
         """Per run: is the window's evidence that of an honest source, at level p?"""
         mean_nis, d_bar, S_bar = w
-        return (mean_nis <= chi2.ppf(p, 2 * n) / n) & (n * nis(d_bar, S_bar) <= chi2.ppf(p, 2))
+        return (mean_nis <= chi2.quantile(p, 2 * n) / n) & (
+            n * nis(d_bar, S_bar) <= chi2.quantile(p, 2)
+        )
 
     def select(self, z: Observation | None, transfers: Sequence[Observation]) -> list[Observation]:
         """The transfers to use at this step, each with a mask of the runs that use it."""
@@ -151,7 +153,7 @@ class TransferPolicy:
             keep = np.ones(B, dtype=bool) if t.mask is None else t.mask.copy()
             if z is not None:
                 d, S = disagreement(t, z)
-                keep &= nis(d, S) <= chi2.ppf(self.probability, 2)
+                keep &= nis(d, S) <= chi2.quantile(self.probability, 2)
                 hist.append((d, S))
             n = len(hist)
             cov = t.cov
@@ -162,7 +164,9 @@ class TransferPolicy:
                 keep &= self._consistent(w, n, self.probability)
                 self.forget |= taught & ~self._consistent(w, n, self.rollback_probability)
                 mean_nis, d_bar, S_bar = w
-                temper = np.maximum(1.0, mean_nis / (chi2.ppf(self.temper_quantile, 2 * n) / n))
+                temper = np.maximum(
+                    1.0, mean_nis / (chi2.quantile(self.temper_quantile, 2 * n) / n)
+                )
                 bias = position_fix(t.sensor).from_position(
                     t.mean, bias_second_moment(d_bar, S_bar, n)
                 )

@@ -18,26 +18,19 @@ around the anchors' mean, and, when the sensor's measurement fixes a position
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
+from tltrack.filters import chi2
 from tltrack.filters.kernels import resample
 from tltrack.filters.likelihood import Likelihood
 from tltrack.models.base import MotionModel, PositionFix
 from tltrack.models.observation import Observation
 
 Array = NDArray[np.float64]
-
-
-@functools.cache
-def _nis_limit(tail: float, n_z: int) -> float:
-    """chi2_{n_z}^{-1}(1 - tail): computed once per (tail, n_z), as scipy takes ~0.1 ms."""
-    return float(chi2.ppf(1.0 - tail, n_z))
 
 
 class Reinitialisable(Protocol):
@@ -73,7 +66,7 @@ class Recovery:
         peak, ess = np.empty(B), np.empty(B)
         resample.peak_and_ess(rho, peak, ess, np.empty(N))
         best = -2.0 * peak  # the smallest NIS; +inf when no particle's is finite
-        return ~((best <= _nis_limit(self.tail, z.sensor.n_z)) & (ess * N >= self.min_ess))
+        return ~((best <= chi2.quantile(1.0 - self.tail, z.sensor.n_z)) & (ess * N >= self.min_ess))
 
     def __call__(self, pf: Reinitialisable, z: Observation) -> NDArray[np.bool_]:
         """Reinitialise the lost runs of ``pf`` around ``z``; returns which were."""

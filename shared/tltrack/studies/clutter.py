@@ -41,7 +41,8 @@ from tltrack.config import Config
 from tltrack.engine.montecarlo import run_sweep
 from tltrack.engine.scenario import simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.filters.association import gate_threshold, gate_volume
+from tltrack.filters import chi2
+from tltrack.filters.association import gate_volume
 from tltrack.studies.common import Results, Runner, Setting, plain, row, write
 
 Array = NDArray[np.float64]
@@ -140,7 +141,7 @@ def measured_per_gate(cfg: Config, sensor_id: str = PRIMARY) -> tuple[float, int
     setup = Setup(cfg)
     own = setup.sensors[sensor_id]
     Ri = np.linalg.inv(own.R)
-    gamma = gate_threshold(GATE_PROBABILITY, own.model.n_z)
+    gamma = chi2.quantile(GATE_PROBABILITY, own.model.n_z)
     count, scans = 0, 0
     for run in range(cfg.runs):
         sim = simulate(setup, run)
