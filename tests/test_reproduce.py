@@ -2,9 +2,9 @@ import pytest
 from tltrack.app import app
 from typer.testing import CliRunner
 
-pytestmark = pytest.mark.unit
 
-
+# the whole reproduction (every N to 6000): over a minute, so not in make check's unit tier
+@pytest.mark.system
 def test_reproduce_writes_every_table_and_figure(tmp_path):
     # --workers 1: this process alone (a pool of every core is slower beside other tests)
     args = ["reproduce", "--runs", "2", "--workers", "1", "--out", str(tmp_path)]
@@ -31,6 +31,7 @@ def test_reproduce_writes_every_table_and_figure(tmp_path):
     assert "16.7473" in report  # the paper's number stands beside ours
 
 
+@pytest.mark.unit
 def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
     from tltrack.config import make_config
     from tltrack.engine.montecarlo import run_experiment
@@ -58,6 +59,7 @@ def test_the_ip_sweep_and_a_repeated_job_share_one_run_each(tmp_path):
     assert rep.wall_minutes(docs) == docs["a"]["wall_s"] / 60  # one sweep, counted once
 
 
+@pytest.mark.unit
 def test_the_lost_track_table_alone_has_both_particle_filters_and_the_ukf(tmp_path):
     r = CliRunner().invoke(
         app, ["reproduce", "--runs", "2", "--losses-only", "--workers", "1", "--out", str(tmp_path)]
