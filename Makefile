@@ -42,7 +42,8 @@ base-image:
 	  nohup scripts/build_base_image.sh >build/base-image.log 2>&1 & fi
 
 ## The fast everyday subset: lint, types and the unit tier.
-check: $(STAMP) lint warm
+check: $(STAMP)
+	$(MAKE) --no-print-directory -j2 lint warm  # as in make test
 	$(PYTEST) -q -ra -n auto -m unit
 
 ## The documentation site, into docs/_build/html (open site/index.html, a link to it). Warnings are
