@@ -294,12 +294,17 @@ def test_faults_between_routers(tmp_path, fault):
     else:
         assert during and not any(during), "transfer used while the source was out of reach"
     last = max(used)
-    tail = [used.get(k, False) for k in range(last - 20, last + 1)]
     if fault == "source-router-gone":
+        tail = [used.get(k, False) for k in range(last - 20, last + 1)]
         assert sorted(used) == list(range(1, K + 1)), "the primary missed steps"
         assert not any(tail), "transfer after the source's router went away"
     else:
-        assert mostly_used(tail), f"transfer did not resume: {tail}"
+        # from the first step that used it again to the end (at least AFTER steps): one late
+        # heartbeat on a loaded machine cuts the link for a few steps, and it comes back
+        first = min((k for k in used if k > back and used[k]), default=None)
+        assert first is not None, f"transfer did not resume after step {back}"
+        resumed = [used.get(k, False) for k in range(first, last + 1)]
+        assert mostly_used(resumed), f"transfer did not stay resumed: {resumed}"
 
 
 def _tls_env(ca: Path, cert: Path) -> dict[str, str]:
