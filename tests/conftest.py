@@ -5,7 +5,7 @@ Every test carries exactly one tier mark (a collection error names any that does
 - ``unit``: one process, no router; ``make check`` runs these;
 - ``integration``: real processes over loopback Zenoh (routers, services, the CLI's live
   commands);
-- ``system``: Docker, the built wheel, Chromium, the golden worktree.
+- ``system``: Docker, the built wheel, Chromium, the golden worktree, the whole reproduction.
 
 ``make test`` runs all three on every core (pytest-xdist); live tests whose timing matters share
 the xdist group ``live`` so that they never run beside each other.
@@ -20,6 +20,19 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 TIERS = ("unit", "integration", "system")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--cpu-profile",
+        action="store_true",
+        help="record each test's CPU, its child processes' included (tests/cpu_profile.py)",
+    )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if config.getoption("--cpu-profile"):
+        config.pluginmanager.import_plugin("cpu_profile")
 
 
 @pytest.hookimpl(trylast=True)
