@@ -15,7 +15,6 @@ the filter is surprised more than it admits: its motion model's noise is too low
 
 from __future__ import annotations
 
-import functools
 from collections import deque
 
 import numpy as np
@@ -46,7 +45,6 @@ def nis(z: Observation, predicted: Observation) -> Array:
     return out
 
 
-@functools.cache
 def band(n_z: int, window: int = WINDOW) -> tuple[float, float]:
     """The 99% band of a window's mean NIS for measurements of n_z components."""
     lo, hi = (chi2.quantile(q, window * n_z) / window for q in TAILS)
