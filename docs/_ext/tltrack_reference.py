@@ -23,6 +23,7 @@ own page.
 
 from __future__ import annotations
 
+import abc
 import functools
 import importlib
 import inspect
@@ -163,11 +164,12 @@ def _cell(text: str) -> str:
     return text if text.strip() else ""
 
 
-class _RstDirective(SphinxDirective):
+class _RstDirective(SphinxDirective, abc.ABC):
     """A directive that writes reStructuredText and parses it in place."""
 
+    @abc.abstractmethod
     def rst(self) -> list[str]:
-        raise NotImplementedError
+        """The directive's reStructuredText, one line an item."""
 
     def run(self) -> list[nodes.Node]:
         from sphinx.util.parsing import nested_parse_to_nodes
