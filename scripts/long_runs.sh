@@ -40,7 +40,9 @@ run() {  # run DIR NAME ARGS...: the command, its log and its wall time in DIR/N
     local t0; t0=$(date +%s)
     local cmd=("$TL")  # or ARGS = --script FILE ARGS: a script in the same venv
     if [[ "$1" == --script ]]; then cmd=("$PY" "$ROOT/$2"); shift 2; fi
-    echo "\$ ${cmd[*]##*/} $*" > "$dir/$name.log"
+    # a job that resumes from a checkpoint adds to its log; any other starts it afresh
+    if [[ " $* " != *" --checkpoint "* ]]; then : > "$dir/$name.log"; fi
+    echo "\$ ${cmd[*]##*/} $*  # $(date -u +%FT%TZ)" >> "$dir/$name.log"
     MPLBACKEND=Agg "${cmd[@]}" "$@" >> "$dir/$name.log" 2>&1
     echo "wall: $(( $(date +%s) - t0 )) s, load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$dir/$name.log"
     "$PY" "$ROOT/papers/strip_runs.py" "$dir" > /dev/null
@@ -88,6 +90,9 @@ done
 
 # ---- papers/manoeuvres: one model against the target class's modes on every truth
 run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
+# The 1000 runs (about 7 h on 2 cores): stopped, the same command resumes from its batches.
+run "$MANOEUVRES" manoeuvres-1000 study manoeuvres --runs 1000 --out "$MANOEUVRES/n1000" \
+    --checkpoint "$MANOEUVRES/n1000/checkpoint"
 run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
     --json "$MANOEUVRES/modes_step.json"
 

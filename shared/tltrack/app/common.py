@@ -52,6 +52,15 @@ Workers = Annotated[
     int | None, typer.Option(help="worker processes of the local pool (default: all cores)")
 ]
 BatchSize = Annotated[int | None, typer.Option(help="runs per vectorised batch")]
+#: ``--checkpoint``: finished batches kept in a folder, so that a stopped run resumes.
+CheckpointDir = Annotated[
+    Path | None,
+    typer.Option(
+        "--checkpoint",
+        help="keep each finished batch in this folder; the same command run again after a stop "
+        "resumes from it (only a folder you wrote: its files are pickles)",
+    ),
+]
 
 
 @contextmanager

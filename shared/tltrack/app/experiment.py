@@ -9,6 +9,7 @@ import typer
 
 from tltrack.app.common import (
     BatchSize,
+    CheckpointDir,
     Scheduler,
     Workers,
     app,
@@ -90,6 +91,7 @@ def experiment(
     workers: Workers = None,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
+    checkpoint: CheckpointDir = None,
 ) -> None:
     """Run the Monte-Carlo engine; write DIR/results.json, rmse.png and trajectory.png."""
     from tltrack.engine.experiment import run_and_save
@@ -129,6 +131,7 @@ def experiment(
             batch_size=batch_size,
             progress=lambda n: bar.advance(task, n),
             executor=executor,
+            checkpoint=checkpoint,
         )
     _print_table(doc)
     console.print(f"wrote {out / 'results.json'}, {out / 'rmse.png'}, {out / 'trajectory.png'}")

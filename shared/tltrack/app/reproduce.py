@@ -9,6 +9,7 @@ import typer
 
 from tltrack.app.common import (
     BatchSize,
+    CheckpointDir,
     Scheduler,
     Workers,
     app,
@@ -38,6 +39,7 @@ def reproduce(
     ] = False,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
+    checkpoint: CheckpointDir = None,
 ) -> None:
     """Regenerate every figure and table of the paper's Simulation Results, with report.md."""
     from tltrack.studies import reproduce as rep
@@ -65,6 +67,7 @@ def reproduce(
             batch_size=batch_size,
             executor=executor,
             progress=lambda label, n: bar.advance(tasks[label], n),
+            checkpoint=checkpoint,
         )
     made = write(docs, out)
     console.print(f"wrote {made}")

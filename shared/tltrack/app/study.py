@@ -11,6 +11,7 @@ import typer
 
 from tltrack.app.common import (
     BatchSize,
+    CheckpointDir,
     Scheduler,
     Workers,
     app,
@@ -62,6 +63,7 @@ def study(
     workers: Workers = None,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
+    checkpoint: CheckpointDir = None,
 ) -> None:
     """A study beyond the paper: a markdown report, its numbers (JSON) and a figure."""
     from tltrack import studies
@@ -104,7 +106,9 @@ def study(
     total = runs * configurations.get(name, 1)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=total if name in configurations else None)
-        runner = studies.Runner(lambda n: bar.advance(task, n), workers, batch_size, executor)
+        runner = studies.Runner(
+            lambda n: bar.advance(task, n), workers, batch_size, executor, checkpoint
+        )
         try:
             if name == "realizations":
                 names = [f.strip() for f in filters.split(",") if f.strip()]

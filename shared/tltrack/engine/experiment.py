@@ -23,10 +23,17 @@ def run_and_save(
     batch_size: int | None = None,
     progress: Callable[[int], None] | None = None,
     executor: Executor | None = None,
+    checkpoint: Path | None = None,
 ) -> dict[str, Any]:
     """Run, then write ``out/results.json``, ``out/rmse.png`` and ``out/trajectory.png``."""
     res = run_experiment(
-        cfg, filters, workers=workers, batch_size=batch_size, progress=progress, executor=executor
+        cfg,
+        filters,
+        workers=workers,
+        batch_size=batch_size,
+        progress=progress,
+        executor=executor,
+        checkpoint=checkpoint,
     )
     doc = results.assemble(cfg, res)
     results.write(doc, out)

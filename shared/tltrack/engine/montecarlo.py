@@ -19,11 +19,13 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import nullcontext
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.engine.checkpoint import Checkpoint
 from tltrack.engine.driver import (
     Channel,
     Direct,
@@ -416,6 +418,7 @@ def run_experiment(
     progress: Callable[[int], None] | None = None,
     time_steps: bool = True,
     executor: Executor | None = None,
+    checkpoint: Path | None = None,
 ) -> dict[str, FilterResult]:
     """Run ``cfg.runs`` runs of every filter; ``progress(n)`` hears of each batch of n runs."""
     return run_sweep(
@@ -426,6 +429,7 @@ def run_experiment(
         progress=progress,
         time_steps=time_steps,
         executor=executor,
+        checkpoint=checkpoint,
     )[0]
 
 
@@ -438,6 +442,7 @@ def run_sweep(
     progress: Callable[[int], None] | None = None,
     time_steps: bool = True,
     executor: Executor | None = None,
+    checkpoint: Path | None = None,
 ) -> list[dict[str, FilterResult]]:
     """:func:`run_experiment` for each of ``cfgs`` (they may differ only in the primary's noise
     intensity), running the sources once for all of them; see :func:`run_sweep_batch`.
@@ -445,6 +450,8 @@ def run_sweep(
     Batches run on a local process pool of ``workers`` processes, or on ``executor`` (a Dask
     cluster's, see :mod:`tltrack.engine.cluster`), never both. ``progress`` hears of each batch as
     it completes; results are merged in batch order, so they do not depend on which finished first.
+    With a ``checkpoint`` folder, each finished batch is kept there and a batch found there is
+    read instead of run (:mod:`tltrack.engine.checkpoint`): a sweep that was stopped resumes.
     """
     check_sweep(cfgs)
     if executor is not None and workers is not None:
@@ -453,7 +460,6 @@ def run_sweep(
     check_filters(cfg, names)
     bs = batch_size or default_batch_size(cfg, names)
     batches = [list(range(i, min(i + bs, cfg.runs))) for i in range(0, cfg.runs, bs)]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(batches)))
     totals: list[dict[str, FilterStats]] = [{} for _ in cfgs]
 
     def absorb(stats: list[dict[str, FilterStats]]) -> None:
@@ -464,28 +470,38 @@ def run_sweep(
                 else:
                     total[name] = s
 
-    warm_up()  # workers then load compiled kernels from the cache instead of compiling them
+    kept = Checkpoint(checkpoint, cfgs, names) if checkpoint is not None else None
+    done: dict[int, list[dict[str, FilterStats]]] = {}
+    merged = 0
+
+    def finished(i: int, stats: list[dict[str, FilterStats]], *, new: bool = True) -> None:
+        nonlocal merged
+        if kept and new:
+            kept.save(batches[i], stats)
+        if progress:
+            progress(len(batches[i]))
+        done[i] = stats
+        while merged in done:  # in batch order: float sums in a fixed order
+            absorb(done.pop(merged))
+            merged += 1
+
+    for i, b in enumerate(batches):
+        stats = kept.load(b) if kept else None
+        if stats is not None:
+            finished(i, stats, new=False)
+    todo = [i for i in range(len(batches)) if i >= merged and i not in done]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+    if todo:
+        warm_up()  # workers then load compiled kernels from the cache instead of compiling them
     if executor is None and workers == 1:
-        for b in batches:
-            absorb(run_sweep_batch(cfgs, names, b))
-            if progress:
-                progress(len(b))
-    else:
+        for i in todo:
+            finished(i, run_sweep_batch(cfgs, names, batches[i]))
+    elif todo:
         with nullcontext(executor) if executor else ProcessPoolExecutor(workers) as pool:
-            futures = {
-                pool.submit(run_sweep_batch, cfgs, names, b): i for i, b in enumerate(batches)
-            }
-            done: dict[int, list[dict[str, FilterStats]]] = {}
-            merged = 0
+            futures = {pool.submit(run_sweep_batch, cfgs, names, batches[i]): i for i in todo}
             try:
                 for fut in as_completed(futures):
-                    i = futures[fut]
-                    done[i] = fut.result()
-                    if progress:
-                        progress(len(batches[i]))
-                    while merged in done:  # in batch order: float sums in a fixed order
-                        absorb(done.pop(merged))
-                        merged += 1
+                    finished(futures[fut], fut.result())
             finally:
                 for fut in futures:
                     fut.cancel()

@@ -265,6 +265,7 @@ def clutter(
             batch_size=runner.batch_size,
             executor=runner.executor,
             time_steps=False,
+            checkpoint=runner.checkpoint,
         )
     measured = {pd: [measured_per_gate(c) for c in cells[pd]] for pd in pds}
     base = cells[pds[0]][0]

@@ -35,6 +35,8 @@ class Runner:
     workers: int | None = None
     batch_size: int | None = None
     executor: Executor | None = None  #: a Dask cluster's (tltrack.engine.cluster), or local
+    #: where finished batches are kept, so that a stopped study resumes (tltrack.engine.checkpoint)
+    checkpoint: Path | None = None
 
     def run(self, cfg: Config, names: Sequence[str]) -> Results:
         return self.sweep([cfg], names)[0]
@@ -48,6 +50,7 @@ class Runner:
             workers=self.workers,
             batch_size=self.batch_size,
             executor=self.executor,
+            checkpoint=self.checkpoint,
         )
 
 

@@ -149,9 +149,11 @@ def run_all(
     progress: Callable[[str, int], None] | None = None,
     batch_size: int | None = None,
     executor: Executor | None = None,
+    checkpoint: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Run every job (``progress(label, runs_done)``), saving each one's results.json; the
-    batches go to ``executor`` (a Dask cluster's) when given, else to a local pool.
+    batches go to ``executor`` (a Dask cluster's) when given, else to a local pool, and are kept
+    in ``checkpoint`` when given (:mod:`tltrack.engine.checkpoint`).
 
     A job's ``wall_s`` is that of its sweep (``sweep`` lists the jobs that shared it).
     """
@@ -175,6 +177,7 @@ def run_all(
             batch_size=batch_size,
             executor=executor,
             progress=advance,
+            checkpoint=checkpoint,
         )
         wall = time.perf_counter() - t0
         by_intensity = {c.primary_intensity: r for c, r in zip(cfgs, swept, strict=True)}
