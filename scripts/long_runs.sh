@@ -89,10 +89,12 @@ for s in robust sources budget; do
 done
 
 # ---- papers/manoeuvres: one model against the target class's modes on every truth
-run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES"
-# The issue's 1000 runs (about 7 h on 2 cores): stopped, the same command resumes from its batches.
+# Both keep their batches in one checkpoint folder (git ignores it): stopped, the same command
+# resumes, and the 1000 runs (about 7 h on 2 cores) reuse the 200's.
+run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES" \
+    --checkpoint "$MANOEUVRES/checkpoint"
 run "$MANOEUVRES" manoeuvres-1000 study manoeuvres --runs 1000 --out "$MANOEUVRES/n1000" \
-    --checkpoint "$MANOEUVRES/n1000/checkpoint"
+    --checkpoint "$MANOEUVRES/checkpoint"
 run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
     --json "$MANOEUVRES/modes_step.json"
 
