@@ -41,7 +41,7 @@ run() {  # run DIR NAME ARGS...: the command, its log and its wall time in DIR/N
     local cmd=("$TL")  # or ARGS = --script FILE ARGS: a script in the same venv
     if [[ "$1" == --script ]]; then cmd=("$PY" "$ROOT/$2"); shift 2; fi
     # a job that resumes from a checkpoint adds to its log; any other starts it afresh
-    if [[ " $* " != *" --checkpoint "* ]]; then : > "$dir/$name.log"; fi
+    if [[ " $* " != *" --checkpoint"* ]]; then : > "$dir/$name.log"; fi
     echo "\$ ${cmd[*]##*/} $*  # $(date -u +%FT%TZ)" >> "$dir/$name.log"
     MPLBACKEND=Agg "${cmd[@]}" "$@" >> "$dir/$name.log" 2>&1
     echo "wall: $(( $(date +%s) - t0 )) s, load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)" >> "$dir/$name.log"

@@ -82,7 +82,7 @@ def bench(
 ) -> None:
     """Time one filter step (tl-pf, pf, source-pf) against plain NumPy and Stone Soup, side by side.
 
-    Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `bench` extra);
+    Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `stonesoup` extra);
     `tltrack bench --clutter` (tltrack.perf.clutter)
     """
     if clutter:

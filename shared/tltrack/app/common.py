@@ -52,6 +52,21 @@ Workers = Annotated[
     int | None, typer.Option(help="worker processes of the local pool (default: all cores)")
 ]
 BatchSize = Annotated[int | None, typer.Option(help="runs per vectorised batch")]
+
+
+def checked_checkpoint(folder: Path | None) -> Path | None:
+    """``--checkpoint``'s folder, refused at once (exit 2) when it cannot be written."""
+    from tltrack.engine.checkpoint import writable
+
+    if folder is not None:
+        try:
+            writable(folder)
+        except OSError as err:
+            console.print(f"[red]error:[/red] --checkpoint {folder}: {err.strerror or err}")
+            raise typer.Exit(2) from None
+    return folder
+
+
 #: ``--checkpoint``: finished batches kept in a folder, so that a stopped run resumes.
 CheckpointDir = Annotated[
     Path | None,

@@ -14,6 +14,7 @@ from tltrack.app.common import (
     Workers,
     app,
     build_config,
+    checked_checkpoint,
     console,
     engine_pool,
     filter_names,
@@ -121,6 +122,7 @@ def experiment(
         rpf_bandwidth=rpf_bandwidth,
     )
     names = filter_names(filters, cfg)
+    checkpoint = checked_checkpoint(checkpoint)
     with engine_pool(scheduler, workers) as executor, progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
         doc = run_and_save(

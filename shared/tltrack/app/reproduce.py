@@ -13,6 +13,7 @@ from tltrack.app.common import (
     Scheduler,
     Workers,
     app,
+    checked_checkpoint,
     console,
     engine_pool,
     progress_bar,
@@ -58,6 +59,7 @@ def reproduce(
         todo, write = rep.loss_jobs(base), rep.losses_report
     else:
         todo, write = rep.jobs(base) + rep.loss_jobs(base), rep.report
+    checkpoint = checked_checkpoint(checkpoint)
     with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
         tasks = {j.label: bar.add_task(j.label, total=runs) for j in todo}
         docs = rep.run_all(

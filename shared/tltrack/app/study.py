@@ -15,6 +15,7 @@ from tltrack.app.common import (
     Scheduler,
     Workers,
     app,
+    checked_checkpoint,
     console,
     engine_pool,
     progress_bar,
@@ -104,6 +105,7 @@ def study(
         "links": len(studies.link_cells()),
     }
     total = runs * configurations.get(name, 1)
+    checkpoint = checked_checkpoint(checkpoint)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=total if name in configurations else None)
         runner = studies.Runner(

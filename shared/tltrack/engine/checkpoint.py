@@ -7,24 +7,37 @@ again. The merged result is then bit for bit that of one uninterrupted call: a b
 depend on its runs alone (every random number comes from a per-(seed, run, purpose) stream), and
 the merge's order is the batches' order either way.
 
-A batch's file is named by a digest of all that determines its statistics: the configurations
-(all but ``runs``, so a 1000-run sweep reuses the batches of a 200-run one made with the same batch
-size), the filters, the batch's runs, and the code of the packages that compute them (models,
-filters, config, engine; their comments and docstrings aside). Any other change names other
-files: a stale batch is never read, it is run again. Files are written whole or not at all (a
-temporary file, then a rename), so a process killed mid-write leaves nothing half-read; one that
-cannot be read is run again, with a warning. They are pickles: resume only from a folder that you
-wrote.
+A batch's file is named by a digest of all that determines its statistics on this machine:
+
+- the configurations, all but ``runs`` (so a 1000-run sweep reuses the batches of a 200-run one
+  made with the same batch size), and the bytes of a recorded truth's file;
+- the filters and the batch's runs;
+- the code that computes them: the syntax trees of the packages ``models``, ``filters``,
+  ``config`` and ``engine`` without their docstrings (a comment or a docstring edited keeps the
+  batches), and the source of any plugin kind that is registered;
+- the environment that can change the last bit (see :doc:`/howto/dask`): the versions of Python,
+  NumPy, SciPy, numba and llvmlite, the CPU that numba compiles for and its features, and
+  ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, ``NPY_DISABLE_CPU_FEATURES``, ``OPENBLAS_CORETYPE``.
+
+Any other change names other files: a stale batch is never read, it is run again. Files are
+written whole or not at all (a temporary file, synced, then renamed), so a process killed
+mid-write leaves nothing half-read; a file that cannot be read is run again, with a warning. A
+folder that cannot be written is refused before any batch runs; a save that fails later (a full
+disk) warns once and the sweep goes on without its checkpoint. The files are pickles: resume only
+from a folder that you wrote.
 """
 
 from __future__ import annotations
 
 import ast
+import contextlib
 import functools
 import hashlib
+import inspect
 import json
 import os
 import pickle
+import platform
 import tempfile
 import warnings
 from collections.abc import Sequence
@@ -33,32 +46,104 @@ from typing import Any
 
 from tltrack.config import Config
 
-#: the packages whose source decides a batch's numbers
+#: the packages whose code decides a batch's numbers
 NUMERICAL = ("models", "filters", "config", "engine")
+#: environment variables that change which machine code numba and NumPy run
+CPU_VARIABLES = (
+    "NUMBA_CPU_NAME",
+    "NUMBA_CPU_FEATURES",
+    "NPY_DISABLE_CPU_FEATURES",
+    "OPENBLAS_CORETYPE",
+)
+
+
+def _tree(source: bytes) -> str:
+    """A module's syntax tree without its docstrings."""
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (
+            isinstance(body, list)
+            and body
+            and isinstance(body[0], ast.Expr)
+            and isinstance(body[0].value, ast.Constant)
+            and isinstance(body[0].value.value, str)
+        ):
+            node.body = body[1:] or [ast.Pass()]  # type: ignore[attr-defined]
+    return ast.dump(tree)
+
+
+#: the package's folder
+PACKAGE = Path(__file__).resolve().parents[1]
 
 
 @functools.cache
-def code_digest() -> str:
-    """A digest of the numerical packages' code (:data:`NUMERICAL`): their syntax trees without
-    docstrings, so that a comment or a docstring changed keeps a checkpoint, and code does not."""
-    root = Path(__file__).resolve().parents[1]
+def code_digest(root: Path = PACKAGE) -> str:
+    """A digest of the numerical packages' code (:data:`NUMERICAL`) under ``root``."""
     h = hashlib.sha256()
+    files = 0
     for pkg in NUMERICAL:
         for path in sorted((root / pkg).rglob("*.py")):
-            tree = ast.parse(path.read_bytes())
-            for node in ast.walk(tree):
-                body = getattr(node, "body", None)
-                if (
-                    isinstance(body, list)
-                    and body
-                    and isinstance(body[0], ast.Expr)
-                    and isinstance(body[0].value, ast.Constant)
-                    and isinstance(body[0].value.value, str)
-                ):
-                    node.body = body[1:] or [ast.Pass()]  # type: ignore[attr-defined]
+            if path.name.startswith(".") or not path.is_file():  # an editor's lock file
+                continue
             h.update(path.relative_to(root).as_posix().encode())
-            h.update(ast.dump(tree).encode())
+            h.update(_tree(path.read_bytes()).encode())
+            files += 1
+    if not files:
+        raise RuntimeError(f"no source under {root} to digest: a checkpoint needs tltrack's .py")
     return h.hexdigest()
+
+
+def plugin_digest() -> str:
+    """A digest of the source of every registered kind defined outside tltrack (plugins)."""
+    from tltrack.filters.kinds import FILTERS
+    from tltrack.models.kinds import MOTIONS, SENSORS
+
+    h = hashlib.sha256()
+    for registry in (SENSORS, MOTIONS, FILTERS):
+        for name in [*registry.names(), *registry.imported.values()]:
+            cls = registry.get(name)
+            module = getattr(cls, "__module__", "")
+            if module.split(".")[0] == "tltrack":
+                continue
+            h.update(f"{name}={module}:{getattr(cls, '__qualname__', '')}".encode())
+            with contextlib.suppress(OSError, TypeError):  # no source: its name alone
+                h.update(Path(inspect.getsourcefile(cls) or "").read_bytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def environment() -> dict[str, Any]:
+    """What besides the code can change a batch's last bit on this machine."""
+    import llvmlite
+    import llvmlite.binding as ll
+    import numba
+    import numpy
+    import scipy
+
+    # numba compiles for NUMBA_CPU_NAME (with NUMBA_CPU_FEATURES) when set, else for this host
+
+    return {
+        "python": platform.python_version(),
+        "versions": [m.__version__ for m in (numpy, scipy, numba, llvmlite)],
+        "cpu": ll.get_host_cpu_name(),
+        "features": ll.get_host_cpu_features().flatten(),
+        "variables": {v: os.environ.get(v) for v in CPU_VARIABLES},
+    }
+
+
+def _file_bytes(cfg: Config) -> str | None:
+    """The digest of a recorded truth's file, which the configuration names only by its path."""
+    return hashlib.sha256(Path(cfg.truth_file).read_bytes()).hexdigest() if cfg.truth_file else None
+
+
+def writable(folder: Path) -> None:
+    """Make ``folder`` and write a file in it, or raise :class:`OSError`: a checkpoint that
+    cannot be kept is refused before any batch runs, not hours later."""
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=folder, prefix=".tmp-")
+    os.close(fd)
+    os.unlink(name)
 
 
 class Checkpoint:
@@ -66,13 +151,17 @@ class Checkpoint:
 
     def __init__(self, folder: Path, cfgs: Sequence[Config], names: Sequence[str]) -> None:
         self.folder = Path(folder)
-        self.folder.mkdir(parents=True, exist_ok=True)
+        writable(self.folder)
         what = {
             "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
+            "truth_files": [_file_bytes(c) for c in cfgs],
             "filters": list(names),
             "code": code_digest(),
+            "plugins": plugin_digest(),
+            "environment": environment(),
         }
         self._sweep = json.dumps(what, sort_keys=True)
+        self._saving = True
 
     def path(self, runs: Sequence[int]) -> Path:
         """The file of the batch of ``runs``."""
@@ -87,7 +176,7 @@ class Checkpoint:
         try:
             with path.open("rb") as f:
                 sweep, saved_runs, stats = pickle.load(f)
-        except Exception as err:  # truncated, or not ours: run the batch again
+        except Exception as err:  # cut short by a crash, or not ours: run the batch again
             warnings.warn(f"{path}: unreadable ({err}); running its batch again", stacklevel=2)
             return None
         if sweep != self._sweep or saved_runs != list(runs):  # a digest collision, in theory
@@ -95,13 +184,24 @@ class Checkpoint:
         return stats
 
     def save(self, runs: Sequence[int], stats: Any) -> None:
-        """Write the batch's statistics whole: to a temporary file, then renamed."""
+        """Write the batch's statistics whole: to a temporary file, synced, then renamed. A
+        failure (a full disk) warns once and stops saving; the sweep's numbers are unaffected."""
+        if not self._saving:
+            return
         path = self.path(runs)
-        fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=".tmp-", suffix=".pkl")
+        tmp = None
         try:
+            fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=".tmp-", suffix=".pkl")
+            os.fchmod(fd, 0o644)
             with os.fdopen(fd, "wb") as f:
                 pickle.dump((self._sweep, list(runs), stats), f, pickle.HIGHEST_PROTOCOL)
+                f.flush()
+                os.fsync(f.fileno())
             os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        except OSError as err:
+            if tmp:
+                Path(tmp).unlink(missing_ok=True)
+            self._saving = False
+            warnings.warn(
+                f"checkpoint {self.folder}: cannot save ({err}); going on without it", stacklevel=2
+            )

@@ -502,6 +502,12 @@ def run_sweep(
             try:
                 for fut in as_completed(futures):
                     finished(futures[fut], fut.result())
+            except BaseException:  # keep what finished meanwhile, then stop
+                for fut, i in futures.items():
+                    ok = fut.done() and not fut.cancelled() and fut.exception() is None
+                    if kept and ok and i >= merged and i not in done:
+                        kept.save(batches[i], fut.result())
+                raise
             finally:
                 for fut in futures:
                     fut.cancel()
