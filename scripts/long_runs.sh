@@ -102,6 +102,11 @@ run "$MANOEUVRES" modes-step --script benchmarks/modes_step.py --runs 10 \
 run "$CLUTTER" clutter-20 study clutter --runs 20 --particles 1000 --out "$CLUTTER"
 # ... at the study's own N = 6000 (its default), in a folder of its own
 run "$CLUTTER" clutter-6000-100 study clutter --runs 100 --out "$CLUTTER/n6000"
+# ... the 200 and 1000 runs, sharing their batches (the 1000 about 11 h on 2 cores)
+run "$CLUTTER" clutter-6000-200 study clutter --runs 200 --out "$CLUTTER/n6000-200" \
+    --checkpoint "$CLUTTER/checkpoint"
+run "$CLUTTER" clutter-6000-1000 study clutter --runs 1000 --out "$CLUTTER/n6000-1000" \
+    --checkpoint "$CLUTTER/checkpoint"
 # The headline's factor at the study's N = 6000, on a grid below the study's first point.
 run "$CLUTTER" factor-200 --script papers/clutter/factor.py 200 "$CLUTTER/factor"
 # ... with the paper's clean sensor at the source, and its gates against R's
