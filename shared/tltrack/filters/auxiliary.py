@@ -343,21 +343,25 @@ class AuxiliaryParticleFilter:
 
     def estimate(self) -> Estimate:
         """The weighted cloud's mean and covariance, plus Q_v (as the paper's SIR reports)."""
+        w = None
         if self._moments is None:
-            self._moments = _weighted_moments(self.x, self._weights())
+            w = self._weights()
+            self._moments = _weighted_moments(self.x, w)
         mean, cov = self._moments
-        p = self.mode_probabilities
-        if p is None or self.modes is None:
+        if self.modes is None:
             return Estimate(mean.copy(), cov + self.model.Q)
+        p = self._mode_shares(self._weights() if w is None else w)  # the weights computed once
         return Estimate(mean.copy(), cov + np.einsum("mb,mij->bij", p, self.modes.Qs))
 
     @property
     def mode_probabilities(self) -> Array | None:
         """(M, B): each motion mode's weighted share of the cloud; None without modes."""
-        if self.modes is None:
-            return None
+        return None if self.modes is None else self._mode_shares(self._weights())
+
+    def _mode_shares(self, w: Array) -> Array:
+        assert self.modes is not None
         modes = self.modes.of if not self._pending or self._next is None else self._next
-        return self.modes.probabilities(modes, self._weights())
+        return self.modes.probabilities(modes, w)
 
     def predicted_observation(self, sensor: MeasurementModel, R: Array) -> Observation:
         """eta_hat and P_eta_eta: the weighted moments of h over the predicted cloud (seed eqs.
@@ -449,11 +453,11 @@ class AuxiliaryParticleFilter:
     def _chosen_modes(self, anc: NDArray[np.int64]) -> NDArray[np.int64]:
         """Each slot's new mode, its ancestor's: gathered once per ancestry (the propagation
         and the update of a step ask for the same)."""
-        assert self._next is not None
+        assert self._next is not None and self.modes is not None
         if anc is self._identity:  # the predicted cloud's: every slot its own ancestor
             return self._next
         if self._gathered is None or self._gathered[0] is not anc:
-            modes = np.take_along_axis(self._next, anc[:, : self.N], axis=1)
+            modes = self.modes.gather(self._next, anc)
             self._gathered = (anc, modes)
         return self._gathered[1]
 

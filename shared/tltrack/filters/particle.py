@@ -149,7 +149,7 @@ class ParticleFilter:
             propagation.gather(self._pre, self._anc, out)
             out.flags.writeable = False
             if self.modes is not None:  # each slot takes its ancestor's mode, as its state
-                self.modes.of = np.take_along_axis(self.modes.of, self._anc[:, : self.N], axis=1)
+                self.modes.of = self.modes.gather(self.modes.of, self._anc)
             self._x, self._pre = out, None
         return self._x
 
@@ -182,7 +182,7 @@ class ParticleFilter:
             return None
         of = self.modes.of
         if self._pre is not None:  # resampled: each slot holds its ancestor's mode
-            of = np.take_along_axis(of, self._anc[:, : self.N], axis=1)
+            of = self.modes.gather(of, self._anc)
         return self.modes.probabilities(of)
 
     def _process_noise(self) -> Array:
@@ -200,7 +200,7 @@ class ParticleFilter:
             src, anc = self._x, self._anc
             anc[:] = np.arange(self.N + 1)
         if self.modes is not None:
-            modes = self.modes.switch(np.take_along_axis(self.modes.of, anc[:, : self.N], axis=1))
+            modes = self.modes.switch(self.modes.gather(self.modes.of, anc))
             U = self._draw_uniforms()  # each run's, as the single-model filter draws them
             self.x = self.modes.propagate(src, anc, modes, U, lambda: self._gaussians(U))
             self.modes.of = modes
