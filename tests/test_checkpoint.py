@@ -182,3 +182,16 @@ def test_a_checkpoint_that_cannot_be_written_is_refused_before_any_run(tmp_path)
     r = CliRunner().invoke(app, args)
     assert r.exit_code == 2, r.output
     assert "--checkpoint" in r.output and not (tmp_path / "o").exists()
+
+
+def test_a_save_that_fails_warns_and_the_sweep_goes_on(tmp_path, monkeypatch):
+    cfgs = _cfgs(runs=4)
+    whole = _sweep(cfgs)
+
+    def full(*_args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("tltrack.engine.checkpoint.os.replace", full)
+    with pytest.warns(UserWarning, match="cannot save"):
+        _same(_sweep(cfgs, tmp_path), whole)
+    assert not list(tmp_path.glob("*.pkl"))  # nor a temporary file left behind

@@ -167,3 +167,19 @@ def test_the_manoeuvre_study_writes_one_model_against_the_modes_on_every_truth(
     assert (tmp_path / "manoeuvres.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match="no such track"):
         manoeuvres(Setting(runs=1), Runner(workers=1), tmp_path, tracks=tmp_path)
+
+
+def test_gather_is_take_along_axis_on_the_ancestors_slots() -> None:
+    """Each slot's ancestor's mode, as np.take_along_axis gives it, past the scratch column."""
+    from tltrack.filters.particle_modes import ParticleModes
+    from tltrack.models.coordinated_turn import CoordinatedTurn
+    from tltrack.models.modes import MotionModes, Straight
+
+    models = (Straight(1.0, 1.0), CoordinatedTurn(1.0, 4.0, 1e-2), CoordinatedTurn(1.0, 4.0, 1e-4))
+    chain = MotionModes(("cv", "ct1", "ct2"), models, np.full((3, 3), 1 / 3), np.full(3, 1 / 3))
+    pm = ParticleModes(chain, [np.random.default_rng(b) for b in range(3)], 50)
+    modes = np.random.default_rng(9).integers(0, 3, (3, 50))
+    anc = np.random.default_rng(8).integers(0, 50, (3, 51))  # (B, N + 1), as the filters keep it
+    got = pm.gather(modes, anc)
+    assert got.dtype == np.int64 and got.shape == (3, 50)
+    np.testing.assert_array_equal(got, np.take_along_axis(modes, anc[:, :50], axis=1))

@@ -52,6 +52,15 @@ Workers = Annotated[
     int | None, typer.Option(help="worker processes of the local pool (default: all cores)")
 ]
 BatchSize = Annotated[int | None, typer.Option(help="runs per vectorised batch")]
+#: ``--checkpoint``: finished batches kept in a folder, so that a stopped run resumes.
+CheckpointDir = Annotated[
+    Path | None,
+    typer.Option(
+        "--checkpoint",
+        help="keep each finished batch in this folder; the same command run again after a stop "
+        "resumes from it (only a folder you wrote: its files are pickles)",
+    ),
+]
 
 
 def checked_checkpoint(folder: Path | None) -> Path | None:
@@ -65,17 +74,6 @@ def checked_checkpoint(folder: Path | None) -> Path | None:
             console.print(f"[red]error:[/red] --checkpoint {folder}: {err.strerror or err}")
             raise typer.Exit(2) from None
     return folder
-
-
-#: ``--checkpoint``: finished batches kept in a folder, so that a stopped run resumes.
-CheckpointDir = Annotated[
-    Path | None,
-    typer.Option(
-        "--checkpoint",
-        help="keep each finished batch in this folder; the same command run again after a stop "
-        "resumes from it (only a folder you wrote: its files are pickles)",
-    ),
-]
 
 
 @contextmanager

@@ -13,8 +13,8 @@ A batch's file is named by a digest of all that determines its statistics on thi
   made with the same batch size), and the bytes of a recorded truth's file;
 - the filters and the batch's runs;
 - the code that computes them: the syntax trees of the packages ``models``, ``filters``,
-  ``config`` and ``engine`` without their docstrings (a comment or a docstring edited keeps the
-  batches), and the source of any plugin kind that is registered;
+  ``config`` and ``engine`` and of ``declare.py``, without their docstrings (a comment or a
+  docstring edited keeps the batches), and the source of any plugin kind that is registered;
 - the environment that can change the last bit (see :doc:`/howto/dask`): the versions of Python,
   NumPy, SciPy, numba and llvmlite, the CPU that numba compiles for and its features, and
   ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, ``NPY_DISABLE_CPU_FEATURES``, ``OPENBLAS_CORETYPE``.
@@ -46,8 +46,12 @@ from typing import Any
 
 from tltrack.config import Config
 
+#: the package's folder
+PACKAGE = Path(__file__).resolve().parents[1]
 #: the packages whose code decides a batch's numbers
 NUMERICAL = ("models", "filters", "config", "engine")
+#: the declarations that they build on (parameters, registries)
+DECLARE = "declare.py"
 #: environment variables that change which machine code numba and NumPy run
 CPU_VARIABLES = (
     "NUMBA_CPU_NAME",
@@ -73,23 +77,18 @@ def _tree(source: bytes) -> str:
     return ast.dump(tree)
 
 
-#: the package's folder
-PACKAGE = Path(__file__).resolve().parents[1]
-
-
 @functools.cache
 def code_digest(root: Path = PACKAGE) -> str:
-    """A digest of the numerical packages' code (:data:`NUMERICAL`) under ``root``."""
+    """A digest of the numerical packages' code (:data:`NUMERICAL`, :data:`DECLARE`) under
+    ``root``."""
+    paths = [root / DECLARE] + [p for pkg in NUMERICAL for p in sorted((root / pkg).rglob("*.py"))]
+    # an editor's lock file (.#x.py) is no source; nor is a declare.py that is not there
+    paths = [p for p in paths if not p.name.startswith(".") and p.is_file()]
     h = hashlib.sha256()
-    files = 0
-    for pkg in NUMERICAL:
-        for path in sorted((root / pkg).rglob("*.py")):
-            if path.name.startswith(".") or not path.is_file():  # an editor's lock file
-                continue
-            h.update(path.relative_to(root).as_posix().encode())
-            h.update(_tree(path.read_bytes()).encode())
-            files += 1
-    if not files:
+    for path in paths:
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(_tree(path.read_bytes()).encode())
+    if not paths:
         raise RuntimeError(f"no source under {root} to digest: a checkpoint needs tltrack's .py")
     return h.hexdigest()
 
@@ -114,14 +113,14 @@ def plugin_digest() -> str:
 
 @functools.cache
 def environment() -> dict[str, Any]:
-    """What besides the code can change a batch's last bit on this machine."""
+    """What besides the code can change a batch's last bit on this machine: numba compiles for
+    the host's CPU unless ``NUMBA_CPU_NAME`` says otherwise, NumPy picks its loops by the CPU's
+    features."""
     import llvmlite
     import llvmlite.binding as ll
     import numba
     import numpy
     import scipy
-
-    # numba compiles for NUMBA_CPU_NAME (with NUMBA_CPU_FEATURES) when set, else for this host
 
     return {
         "python": platform.python_version(),
@@ -132,7 +131,7 @@ def environment() -> dict[str, Any]:
     }
 
 
-def _file_bytes(cfg: Config) -> str | None:
+def _truth_digest(cfg: Config) -> str | None:
     """The digest of a recorded truth's file, which the configuration names only by its path."""
     return hashlib.sha256(Path(cfg.truth_file).read_bytes()).hexdigest() if cfg.truth_file else None
 
@@ -154,7 +153,7 @@ class Checkpoint:
         writable(self.folder)
         what = {
             "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
-            "truth_files": [_file_bytes(c) for c in cfgs],
+            "truth_files": [_truth_digest(c) for c in cfgs],
             "filters": list(names),
             "code": code_digest(),
             "plugins": plugin_digest(),
@@ -198,7 +197,7 @@ class Checkpoint:
                 f.flush()
                 os.fsync(f.fileno())
             os.replace(tmp, path)
-        except OSError as err:
+        except (OSError, pickle.PicklingError, TypeError, AttributeError) as err:
             if tmp:
                 Path(tmp).unlink(missing_ok=True)
             self._saving = False

@@ -491,8 +491,8 @@ def run_sweep(
             finished(i, stats, new=False)
     todo = [i for i in range(len(batches)) if i >= merged and i not in done]
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
-    if todo:
-        warm_up()  # workers then load compiled kernels from the cache instead of compiling them
+    if todo or time_steps:  # workers, and the timed run, then find the kernels compiled
+        warm_up()
     if executor is None and workers == 1:
         for i in todo:
             finished(i, run_sweep_batch(cfgs, names, batches[i]))
@@ -503,10 +503,11 @@ def run_sweep(
                 for fut in as_completed(futures):
                     finished(futures[fut], fut.result())
             except BaseException:  # keep what finished meanwhile, then stop
-                for fut, i in futures.items():
-                    ok = fut.done() and not fut.cancelled() and fut.exception() is None
-                    if kept and ok and i >= merged and i not in done:
-                        kept.save(batches[i], fut.result())
+                if kept:
+                    for fut, i in futures.items():
+                        ok = fut.done() and not fut.cancelled() and fut.exception() is None
+                        if ok and i >= merged and i not in done:
+                            kept.save(batches[i], fut.result())
                 raise
             finally:
                 for fut in futures:

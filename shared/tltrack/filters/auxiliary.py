@@ -350,7 +350,7 @@ class AuxiliaryParticleFilter:
         mean, cov = self._moments
         if self.modes is None:
             return Estimate(mean.copy(), cov + self.model.Q)
-        p = self._mode_shares(self._weights() if w is None else w)  # the weights computed once
+        p = self._mode_shares(self._weights() if w is None else w)  # an exp over (B, N): reused
         return Estimate(mean.copy(), cov + np.einsum("mb,mij->bij", p, self.modes.Qs))
 
     @property

@@ -57,8 +57,9 @@ class ParticleModes:
         return out
 
     def gather(self, modes: Modes, anc: NDArray[np.int64]) -> Modes:
-        """modes[b, anc[b, i]] (B, N): each slot's ancestor's mode. ``np.take_along_axis`` does
-        the same, at three times the cost for B = 1 (its index arrays), a step's cost."""
+        """modes[b, anc[b, i]] (B, N): each slot's ancestor's mode (``anc`` may carry a scratch
+        column past N). Not ``np.take_along_axis``: at B = 1 the index arrays it builds cost three
+        times this, and a step gathers once or twice."""
         out = np.empty((modes.shape[0], self.N), dtype=np.int64)
         for b in range(modes.shape[0]):
             np.take(modes[b], anc[b, : self.N], out=out[b])
