@@ -38,7 +38,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.montecarlo import run_sweep
 from tltrack.engine.scenario import simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.filters import chi2
@@ -257,16 +256,7 @@ def clutter(
     cells: dict[float, list[Config]] = {}
     for pd in pds:
         cells[pd] = configs(setting, pd, densities, source, **changes)
-        swept[pd] = run_sweep(
-            cells[pd],
-            names,
-            progress=runner.progress,
-            workers=runner.workers,
-            batch_size=runner.batch_size,
-            executor=runner.executor,
-            time_steps=False,
-            checkpoint=runner.checkpoint,
-        )
+        swept[pd] = runner.sweep(cells[pd], names, time_steps=False)
     measured = {pd: [measured_per_gate(c) for c in cells[pd]] for pd in pds}
     base = cells[pds[0]][0]
     setup = Setup(base)

@@ -41,8 +41,11 @@ class Runner:
     def run(self, cfg: Config, names: Sequence[str]) -> Results:
         return self.sweep([cfg], names)[0]
 
-    def sweep(self, cfgs: Sequence[Config], names: Sequence[str]) -> list[Results]:
-        """Configurations differing only in the primary's intensity, the sources run once."""
+    def sweep(
+        self, cfgs: Sequence[Config], names: Sequence[str], *, time_steps: bool = True
+    ) -> list[Results]:
+        """Configurations differing only in the primary's sensor, the sources run once; with
+        ``time_steps``, one more run timed step by step (:func:`run_sweep`)."""
         return run_sweep(
             cfgs,
             names,
@@ -50,6 +53,7 @@ class Runner:
             workers=self.workers,
             batch_size=self.batch_size,
             executor=self.executor,
+            time_steps=time_steps,
             checkpoint=self.checkpoint,
         )
 
