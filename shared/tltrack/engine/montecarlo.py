@@ -485,11 +485,13 @@ def run_sweep(
             absorb(done.pop(merged))
             merged += 1
 
+    todo = []  # the batches not read back from the checkpoint
     for i, b in enumerate(batches):
         stats = kept.load(b) if kept else None
-        if stats is not None:
+        if stats is None:
+            todo.append(i)
+        else:
             finished(i, stats, new=False)
-    todo = [i for i in range(len(batches)) if i >= merged and i not in done]
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
     if todo or time_steps:  # workers, and the timed run, then find the kernels compiled
         warm_up()
