@@ -23,13 +23,14 @@ from typing import Any
 
 import numpy as np
 from tltrack.filters.kernels import scan as kernel
+from tltrack.models.angles import wrap_angle
 from tltrack.perf.clutter import run_clutter_bench
 
 
 def pairs_in_boxes(Zx: np.ndarray, Z: np.ndarray, angular: np.ndarray, half: np.ndarray) -> int:
     """How many (particle, detection) residuals are within ``half`` in every component."""
     v = Z[:, None, :] - Zx[:, :, None]  # (n_z, N, M)
-    v[angular] = (v[angular] + np.pi) % (2 * np.pi) - np.pi
+    v[angular] = wrap_angle(v[angular])
     return int(np.all(np.abs(v) <= half[:, None, None], axis=0).sum())
 
 
