@@ -667,6 +667,19 @@ class SettingsDirective(_RstDirective):
 # ---- the operator manifest ------------------------------------------------------------------
 
 
+class ManifestDirective(_RstDirective):
+    """``.. tltrack-manifest::``: the package's operator manifest, as it is (its path is the
+    package's to know, not the page's)."""
+
+    def rst(self) -> list[str]:
+        from tltrack.live.manifest import DEFAULT
+
+        self.env.note_dependency(str(DEFAULT))
+        lines = DEFAULT.read_text().splitlines()
+        caption = DEFAULT.relative_to(ROOT).as_posix()
+        return [".. code-block:: toml", f"   :caption: {caption}", "", *(f"   {x}" for x in lines)]
+
+
 class OperatorsDirective(_RstDirective):
     """``.. tltrack-operators::``: the package manifest's operators, and the files that follow."""
 
@@ -1010,6 +1023,7 @@ def setup(app: Sphinx) -> dict[str, Any]:
     app.add_directive("tltrack-acl", AclDirective)
     app.add_directive("tltrack-operators", OperatorsDirective)
     app.add_directive("tltrack-settings", SettingsDirective)
+    app.add_directive("tltrack-manifest", ManifestDirective)
     app.connect("builder-inited", write_api_pages)
     app.connect("missing-reference", resolve_reference)
     app.connect("autodoc-skip-member", skip_modules)
