@@ -103,3 +103,14 @@ MOSTLY = 0.9
 def mostly_used(used: Sequence[bool]) -> bool:
     """Whether at least :data:`MOSTLY` of these steps used their transfer."""
     return sum(used) >= MOSTLY * len(used)
+
+
+def primary_stats(db: Path) -> dict[str, Any]:
+    """The primary tracker's latest statistics, as the scorer stored them."""
+    if not db.exists():
+        return {}
+    query = "SELECT stats FROM service_stats WHERE service = 'primary_tracker'"
+    with contextlib.closing(sqlite3.connect(db)) as con, contextlib.suppress(sqlite3.Error):
+        row = con.execute(query).fetchone()
+        return json.loads(row[0]) if row else {}
+    return {}

@@ -19,7 +19,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from livestack import end_episode_once, estimates, logs, mostly_used, sim_flags, wait_until
+from livestack import (
+    end_episode_once,
+    estimates,
+    logs,
+    mostly_used,
+    primary_stats,
+    sim_flags,
+    wait_until,
+)
 from relay import Relay, found, sentinels
 from security_helpers import make_certs, session
 from tltrack.config import Config, make_config
@@ -284,10 +292,12 @@ def test_faults_between_routers(tmp_path, fault):
             assert seen, f"the primary took no {AFTER} steps after the fault\n" + logs(s)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
+        # why a step went without its transfer: a cut (logged) or a deadline passed (counted)
+        why = f"{primary_stats(db).get('counters')}\n{logs(s)}"
     used = _transfer_use(db)
     # from step 4: a tracker's first steps are its kernels' first calls, late on a loaded machine
     before = [used[k] for k in range(4, hit - 1)]
-    assert mostly_used(before), f"transfer unused before the fault: {before}"
+    assert mostly_used(before), f"transfer unused before the fault: {before}\n{why}"
     during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
     if fault == "primary-router-restarts":  # its sensor had no clock: gaps, not estimates
         assert not during, "the primary stepped while its router was down"
@@ -304,7 +314,7 @@ def test_faults_between_routers(tmp_path, fault):
         first = min((k for k in used if k > back and used[k]), default=None)
         assert first is not None, f"transfer did not resume after step {back}"
         resumed = [used.get(k, False) for k in range(first, last + 1)]
-        assert mostly_used(resumed), f"transfer did not stay resumed: {resumed}"
+        assert mostly_used(resumed), f"transfer did not stay resumed: {resumed}\n{why}"
 
 
 def _tls_env(ca: Path, cert: Path) -> dict[str, str]:

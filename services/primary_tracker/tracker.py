@@ -242,6 +242,7 @@ class PrimaryTracker:
                     if left > 0:
                         wait = _sooner(wait, left)
                         break
+                    self.svc.count("deadlines_passed")  # a live source's transfer came too late
                 elif waiting:
                     break  # lock-step: wait as long as the source lives
                 ep.steps.release()
