@@ -137,6 +137,43 @@ def test_two_missed_heartbeats_cut_a_link_and_the_next_restores_it():
     assert watch.beat("s1", 0.7) is False
 
 
+def beats(watch: LinkWatch, times: list[float], sid: str = "s1") -> None:
+    for t in times:
+        watch.beat(sid, t)
+
+
+def test_uneven_heartbeats_lengthen_the_silence_that_cuts_up_to_three_periods():
+    steady, uneven = LinkWatch(period_s=0.1), LinkWatch(period_s=0.1)
+    beats(steady, [0.1 * i for i in range(20)])
+    # the same mean period, each beat 20 ms early or late in turn: gaps of 60 and 140 ms
+    beats(uneven, [0.1 * i + (0.02 if i % 2 else -0.02) for i in range(20)])
+    assert steady.timeout_s("s1") == pytest.approx(0.2)
+    timeout = uneven.timeout_s("s1")
+    assert 0.24 < timeout < 0.3, timeout
+    # a silence between the two: the steady link is cut, the uneven one not yet
+    silence = (0.2 + timeout) / 2
+    assert steady.check(1.9 + silence) == ["s1"]
+    assert uneven.check(1.92 + silence) == []
+    assert uneven.due(1.92 + silence) == pytest.approx(timeout - silence)
+    assert uneven.check(1.92 + timeout + 0.01) == ["s1"]
+    wild = LinkWatch(period_s=0.1)
+    beats(wild, [0.0, 0.5, 0.55, 1.2, 1.25, 2.0])
+    assert wild.timeout_s("s1") == pytest.approx(0.3), "capped at three periods"
+    assert LinkWatch(period_s=0.1).timeout_s("unheard") == pytest.approx(0.2)
+
+
+def test_the_silence_of_a_cut_is_not_taken_for_a_gap_between_beats():
+    watch = LinkWatch(period_s=0.1)
+    beats(watch, [0.1 * i for i in range(10)])
+    before = watch.timeout_s("s1")
+    assert watch.check(5.0) == ["s1"]
+    assert watch.beat("s1", 5.0) is True
+    beats(watch, [5.1, 5.2])
+    assert watch.timeout_s("s1") == pytest.approx(before)
+    watch.beat("s1", 5.15)  # overtaken by the one at 5.2: no gap, and last stays 5.2
+    assert watch.due(5.2) == pytest.approx(before)
+
+
 def test_a_source_that_never_beat_is_never_cut():
     watch = LinkWatch(period_s=0.1)
     watch.beat("s2", 0.0)

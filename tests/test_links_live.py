@@ -63,7 +63,7 @@ def logged_at(log: Path, what: str, since: float) -> float | None:
 
 def cuts_in_episode(log: Path) -> int:
     """The cuts the primary logged once its episode began (the start of every process at once
-    on a small machine can hold a heartbeat back beyond two periods: a blip before any step)."""
+    on a small machine can hold a heartbeat back beyond its timeout: a blip before any step)."""
     lines = log.read_text().splitlines()
     start = next(i for i, line in enumerate(lines) if "episode ep-" in line)
     return sum("link to source s1 cut" in line for line in lines[start:])

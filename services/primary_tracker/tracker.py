@@ -143,7 +143,7 @@ class PrimaryTracker:
             log.warning(
                 "link to source %s cut (no heartbeat for %.0f ms): stepping without its transfers",
                 sid,
-                self.links.timeout_s * 1e3,
+                self.links.timeout_s(sid) * 1e3,
             )
             self.svc.count("link_cuts")
             self._links_changed()
@@ -258,7 +258,7 @@ class PrimaryTracker:
     def _worth_waiting(self, sid: str) -> bool:
         """A source whose token went away is not waited for, nor one whose link is cut; an unseen
         one is (it may be late). Lock-step waits as long as the token lives, whatever the
-        heartbeat says: a loaded host delays heartbeats past two periods (a false cut), and an
+        heartbeat says: a loaded host can delay a heartbeat past its timeout (a false cut), and an
         exact replay must not step on without a transfer that is still coming."""
         alive = sid in self.alive or sid not in self.seen
         return alive and (self.s.lockstep or not self.links.is_cut(sid))

@@ -1,4 +1,4 @@
-"""The source-primary link's heartbeat: a cut link noticed in two heartbeat periods.
+"""The source-primary link's heartbeat: a cut link noticed in two to three heartbeat periods.
 
 A source's liveliness token reaches the primary through any route between routers, the referee's
 too, so it outlives a cut of the direct link, over which alone transfers travel (the referee's
@@ -15,6 +15,13 @@ the primary stops waiting for that source's transfers until it beats again.
   given the time, so its logic is tested without a clock. A source that never beat (one that
   predates heartbeats) is never declared cut: the primary then relies on its liveliness token and
   deadline, as before.
+
+How long a silence makes a cut adapts to each link, as TCP's retransmission timeout does
+(Jacobson and Karels; RFC 6298, https://www.rfc-editor.org/rfc/rfc6298): the gaps between a
+link's heartbeats are smoothed into a mean ``gap`` and a mean deviation ``dev``, and the link is cut
+after ``gap + 4 dev`` without a beat, never sooner than :data:`MISSED` periods nor later than
+:data:`MOST_MISSED`. A steady link is cut after two periods, as before; a link whose beats arrive
+unevenly (a loaded host, a jittered route) waits up to three before taking a late beat for a cut.
 """
 
 from __future__ import annotations
@@ -28,8 +35,12 @@ from tltrack.wire.transport import Publisher
 
 LinkState = Literal["up", "cut"]
 
-#: heartbeat periods without a beat that make a cut
+#: heartbeat periods without a beat that make a cut on a steady link
 MISSED = 2
+#: ... and on the most uneven one: the longest a cut goes unnoticed
+MOST_MISSED = 3
+#: the gains of the smoothed gap and its deviation (RFC 6298's alpha and beta)
+ALPHA, BETA = 1 / 8, 1 / 4
 
 
 class HeartbeatSender:
@@ -68,38 +79,52 @@ class HeartbeatSender:
 @dataclass
 class _Link:
     last: float  #: when its last heartbeat arrived (monotonic seconds)
+    gap: float  #: the smoothed gap between its heartbeats [s]
+    dev: float = 0.0  #: the smoothed deviation of that gap [s]
     state: LinkState = "up"
+
+    def arrived(self, now: float) -> None:
+        """RFC 6298's update (section 2.3) of the gap and its deviation, by the gap ending now."""
+        sample = now - self.last
+        self.dev += BETA * (abs(self.gap - sample) - self.dev)
+        self.gap += ALPHA * (sample - self.gap)
+        self.last = now
 
 
 @dataclass
 class LinkWatch:
     """Each source's direct link from its heartbeats: ``up`` while they arrive, ``cut`` after
-    :data:`MISSED` periods of ``period_s`` without one, ``up`` again at the next."""
+    :meth:`timeout_s` without one, ``up`` again at the next."""
 
     period_s: float
-    missed: int = MISSED
     cuts: int = 0  #: how many times a link went from up to cut
     _links: dict[str, _Link] = field(default_factory=dict)
 
-    @property
-    def timeout_s(self) -> float:
-        return self.missed * self.period_s
+    def timeout_s(self, sid: str | None = None) -> float:
+        """The silence that cuts ``sid``'s link: ``gap + 4 dev``, from :data:`MISSED` to
+        :data:`MOST_MISSED` periods (the shortest, for a source not heard yet)."""
+        low, high = MISSED * self.period_s, MOST_MISSED * self.period_s
+        link = self._links.get(sid) if sid is not None else None
+        return low if link is None else min(high, max(low, link.gap + 4 * link.dev))
 
     def beat(self, sid: str, now: float) -> bool:
         """Record a heartbeat of ``sid``; True if its link was cut and is back."""
         link = self._links.get(sid)
         if link is None:
-            self._links[sid] = _Link(now)
+            self._links[sid] = _Link(now, gap=self.period_s)
             return False
         back = link.state == "cut"
-        link.last, link.state = max(link.last, now), "up"
+        if back:  # the silence of a cut is not a gap between beats
+            link.last, link.state = max(link.last, now), "up"
+        elif now > link.last:  # one that overtook another is no gap either
+            link.arrived(now)
         return back
 
     def check(self, now: float) -> list[str]:
         """The sources whose links are found cut now (each once per cut)."""
         cut = []
         for sid, link in self._links.items():
-            if link.state == "up" and now - link.last > self.timeout_s:
+            if link.state == "up" and now - link.last > self.timeout_s(sid):
                 link.state = "cut"
                 self.cuts += 1
                 cut.append(sid)
@@ -112,10 +137,14 @@ class LinkWatch:
 
     def due(self, now: float) -> float | None:
         """Seconds until the next link that is up would be found cut, if any."""
-        ups = [link.last for link in self._links.values() if link.state == "up"]
+        ups = [
+            link.last + self.timeout_s(sid)
+            for sid, link in self._links.items()
+            if link.state == "up"
+        ]
         if not ups:
             return None
-        return max(0.0, min(ups) + self.timeout_s - now)
+        return max(0.0, min(ups) - now)
 
     def states(self) -> dict[str, LinkState]:
         """Each source's link state, for the primary's statistics."""
