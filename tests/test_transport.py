@@ -11,7 +11,6 @@ import os
 import queue
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -26,6 +25,7 @@ import zenoh
 from doubles import RADAR
 from security_helpers import make_certs
 from tltrack.live.router import background_router
+from tltrack.live.topology import free_port
 from tltrack.wire import keys
 from tltrack.wire.messages import Measurement, RejectCounter, Transfer, decode, encode
 from tltrack.wire.transport import (
@@ -219,12 +219,6 @@ def test_settings_refuse_inconsistent_values(kwargs: dict[str, object]) -> None:
 
 
 # ---- process helpers --------------------------------------------------------------------------
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Child:

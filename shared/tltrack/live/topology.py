@@ -18,8 +18,12 @@ writes each router's rules and dictionary from the operator manifest).
 from __future__ import annotations
 
 import contextlib
+import itertools
+import random
 import socket
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 from tltrack.live.manifest import REFEREE_SERVICES
@@ -34,12 +38,37 @@ def free_port() -> int:
 
 
 def free_ports(n: int) -> list[int]:
-    """``n`` distinct free ports (each held until all are found, so none is handed out twice)."""
+    """``n`` distinct free ports, for routers that bind them later.
+
+    They are sought below the kernel's ephemeral range, from which every outgoing connection takes
+    its local port: a port of that range, free when found, can be a client's by the time its
+    router binds it (a router once failed so, "Address already in use"). Each is held until all
+    are found, so none is handed out twice.
+    """
     with contextlib.ExitStack() as held:
-        socks = [held.enter_context(socket.socket()) for _ in range(n)]
-        for s in socks:
-            s.bind(("127.0.0.1", 0))
-        return [int(s.getsockname()[1]) for s in socks]
+        found: list[int] = []
+        for port in _candidates():
+            sock = held.enter_context(socket.socket())
+            try:
+                sock.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            found.append(int(sock.getsockname()[1]))
+            if len(found) == n:
+                return found
+    raise RuntimeError(f"no {n} free ports on 127.0.0.1")
+
+
+def _candidates() -> Iterator[int]:
+    """Ports 10000 up to the ephemeral range's start, in random order (port 0, the kernel's
+    choice, where that range leaves no room or is unknown)."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 0
+    if low - 10000 < 1000:
+        return itertools.repeat(0)
+    return iter(random.sample(range(10000, low), low - 10000))
 
 
 def identity_operator(identity: str) -> str:
