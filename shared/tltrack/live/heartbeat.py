@@ -1,4 +1,4 @@
-"""The source-primary link's heartbeat: a cut link noticed in two to three heartbeat periods.
+"""The source-primary link's heartbeat: a cut link noticed within two periods, three at most.
 
 A source's liveliness token reaches the primary through any route between routers, the referee's
 too, so it outlives a cut of the direct link, over which alone transfers travel (the referee's
