@@ -252,6 +252,12 @@ def _transfer_use(db: Path) -> dict[int, bool]:
     return {k: used for k, (_x, used) in estimates(db).get("tl-rpf", {}).items()}
 
 
+def _why(db: Path, s: supervisor.Stack) -> str:
+    """Why steps went without their transfer: a cut (the primary logs it) or a deadline passed
+    (it counts them); read only when an assertion fails."""
+    return f"{primary_stats(db).get('counters')}\n{logs(s)}"
+
+
 def _reached(db: Path, k: int, name: str = "tl-rpf") -> bool:
     """Whether ``name``'s estimates reached step ``k``."""
     return max(estimates(db).get(name, {}), default=0) >= k
@@ -292,12 +298,10 @@ def test_faults_between_routers(tmp_path, fault):
             assert seen, f"the primary took no {AFTER} steps after the fault\n" + logs(s)
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
-        # why a step went without its transfer: a cut (logged) or a deadline passed (counted)
-        why = f"{primary_stats(db).get('counters')}\n{logs(s)}"
     used = _transfer_use(db)
     # from step 4: a tracker's first steps are its kernels' first calls, late on a loaded machine
     before = [used[k] for k in range(4, hit - 1)]
-    assert mostly_used(before), f"transfer unused before the fault: {before}\n{why}"
+    assert mostly_used(before), f"transfer unused before the fault: {before}\n{_why(db, s)}"
     during = [used[k] for k in range(hit + 5, hit + 25) if k in used]
     if fault == "primary-router-restarts":  # its sensor had no clock: gaps, not estimates
         assert not during, "the primary stepped while its router was down"
@@ -314,7 +318,7 @@ def test_faults_between_routers(tmp_path, fault):
         first = min((k for k in used if k > back and used[k]), default=None)
         assert first is not None, f"transfer did not resume after step {back}"
         resumed = [used.get(k, False) for k in range(first, last + 1)]
-        assert mostly_used(resumed), f"transfer did not stay resumed: {resumed}\n{why}"
+        assert mostly_used(resumed), f"transfer did not stay resumed: {resumed}\n{_why(db, s)}"
 
 
 def _tls_env(ca: Path, cert: Path) -> dict[str, str]:

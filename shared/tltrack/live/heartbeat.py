@@ -100,11 +100,11 @@ class LinkWatch:
     cuts: int = 0  #: how many times a link went from up to cut
     _links: dict[str, _Link] = field(default_factory=dict)
 
-    def timeout_s(self, sid: str | None = None) -> float:
+    def timeout_s(self, sid: str) -> float:
         """The silence that cuts ``sid``'s link: ``gap + 4 dev``, from :data:`MISSED` to
         :data:`MOST_MISSED` periods (the shortest, for a source not heard yet)."""
         low, high = MISSED * self.period_s, MOST_MISSED * self.period_s
-        link = self._links.get(sid) if sid is not None else None
+        link = self._links.get(sid)
         return low if link is None else min(high, max(low, link.gap + 4 * link.dev))
 
     def beat(self, sid: str, now: float) -> bool:
