@@ -156,3 +156,24 @@ def test_the_results_table_marks_a_nees_over_a_singular_covariance(capsys):
     out = capsys.readouterr().out
     assert "3.6e+07*" in out and "7.646 " in out and "7.646*" not in out
     assert "singular" in out
+
+
+def test_progress_in_a_log_file_is_a_line_a_minute(monkeypatch):
+    """Rich redraws its bar only on a terminal: to a file, a long run writes its count and the
+    time left at the mean rate so far, at most once a LOG_EVERY_S."""
+    import io
+
+    from rich.console import Console
+    from tltrack.app import common
+
+    log = io.StringIO()
+    monkeypatch.setattr(common, "console", Console(file=log, force_terminal=False, width=200))
+    monkeypatch.setattr(common, "LOG_EVERY_S", 0.0)
+    with common.progress_bar(10, "sweep") as bar:
+        task = bar.add_task("sweep", total=10)
+        bar.advance(task, 4)
+        monkeypatch.setattr(common, "LOG_EVERY_S", 3600.0)
+        bar.advance(task, 3)  # within the hour: no line
+    lines = [s for s in log.getvalue().splitlines() if s.startswith("sweep: ")]
+    assert len(lines) == 1, log.getvalue()
+    assert re.fullmatch(r"sweep: 4/10 \(40%\) after 0:00:0\d, about 0:00:\d\d left", lines[0])

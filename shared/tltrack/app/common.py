@@ -3,15 +3,25 @@ and the configuration built from a file and the options."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
+from datetime import timedelta
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
 from tltrack.config import Config, ConfigError, DetectionSpec
 
@@ -24,18 +34,64 @@ app = typer.Typer(
 console = Console(stderr=True)
 
 
+#: how often a long job writes its progress when stderr is not a terminal [s]
+LOG_EVERY_S = 60.0
+
+
+class LoggedProgress(Progress):
+    """Rich's bar on a terminal; in a log file, a line every :data:`LOG_EVERY_S` seconds.
+
+    Rich redraws a bar only on a terminal, so a run of hours sent to a file (``nohup``,
+    ``scripts/long_runs.sh``, CI) would say nothing until its end. Its lines give the count, the
+    time so far and the time left at the mean rate so far (a batch's runs finish together, so a
+    recent rate would jump).
+    """
+
+    def __init__(self, what: str, *columns: Any, **kwargs: Any) -> None:
+        super().__init__(*columns, **kwargs)
+        self.what = what
+        self._logged_at = time.monotonic()
+
+    def advance(self, task_id: TaskID, advance: float = 1) -> None:
+        super().advance(task_id, advance)
+        self._log(task_id)
+
+    def update(self, task_id: TaskID, **changes: Any) -> None:
+        super().update(task_id, **changes)
+        self._log(task_id)
+
+    def _log(self, task_id: TaskID) -> None:
+        if self.disable or self.console.is_terminal:
+            return
+        now = time.monotonic()
+        task = self._tasks[task_id]
+        if now - self._logged_at < LOG_EVERY_S or task.finished or not task.completed:
+            return
+        self._logged_at = now
+        elapsed = task.elapsed or 0.0
+        line = f"{self.what}: {task.completed:g}"
+        if task.total:
+            left = elapsed * (task.total - task.completed) / task.completed
+            line += f"/{task.total:g} ({task.completed / task.total:.0%})"
+        line += f" after {timedelta(seconds=round(elapsed))}"
+        if task.total:
+            line += f", about {timedelta(seconds=round(left))} left"
+        self.console.print(line, markup=False, highlight=False)
+
+
 def progress_bar(total: int, what: str) -> Progress:
-    """A progress bar on stderr, for long Monte-Carlo work."""
-    p = Progress(
+    """A progress bar on stderr, for long Monte-Carlo work (a line a minute in a log file)."""
+    return LoggedProgress(
+        what,
         TextColumn(f"[bold]{what}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
+        TimeRemainingColumn(),
         console=console,
         transient=False,
         disable=not console.is_terminal and total < 2,
     )
-    return p
 
 
 #: ``--scheduler``, shared by the commands that run the Monte-Carlo engine.
