@@ -1,4 +1,4 @@
-"""The issue's headline, tl-rpf's 5%-loss clutter density over rpf's at pd = 0.9, at the study's
+"""The study's headline, tl-rpf's 5%-loss clutter density over rpf's at pd = 0.9, at the study's
 N = 6000: the study's grid (0, 0.05, 0.2, ...) has both filters past 5% lost at its first
 non-zero point, so this sweep puts its points below it. Same setting as the study (paper preset,
 fixed truth, 50-sigma field of view); only the grid and the filters differ. The source is the

@@ -59,7 +59,11 @@ class Settings(BaseSettings):
     )
     lockstep: bool = Field(False, description="wait for every live source's transfer, no deadline")
     heartbeat_s: float = Field(
-        0.1, gt=0, le=10, description="the sources' heartbeat period: two missed mean a cut link"
+        0.1,
+        gt=0,
+        le=10,
+        description="the sources' heartbeat period: two to three missed (as the link's jitter "
+        "asks) mean a cut link",
     )
     gap_timeout_s: float = Field(
         1.0, gt=0, description="step without a measurement missing this long"

@@ -7,9 +7,9 @@ not grow with the run count. Every random number comes from a per-(seed, run, pu
 the result is the same whatever the batch size or worker count.
 
 The overall RMSE is the paper's: the mean over k of sqrt(mean over runs of the squared position
-error). Lost runs count (no filter is ever reinitialised here). A run is *lost* when its position
-error stays above ``lost_threshold_m`` through each of its last ``LOST_STEPS`` steps: it has
-diverged, not merely ended on one bad step.
+error). Lost runs count (no filter is reinitialised here unless the config's ``recovery`` asks
+for it). A run is *lost* when its position error stays above ``lost_threshold_m`` through each of
+its last ``LOST_STEPS`` steps: it has diverged, not merely ended on one bad step.
 """
 
 from __future__ import annotations

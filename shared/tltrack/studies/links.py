@@ -10,7 +10,7 @@ arriving later is refused, never used late. The clocks (:mod:`tltrack.config.tim
 source samples 4 times slower, as fast, or 4 times faster than the primary; its clock is ahead
 of the primary's by 0, 1/4 or 1/2 of the primary's period, under a clock bound of half a period
 (which widens every transfer, :meth:`~tltrack.engine.driver.Sources.clock_spread_s`). The
-question (issue 34): is TL ever worse than the isolated filter, by the paired per-run difference
+question: is TL ever worse than the isolated filter, by the paired per-run difference
 at 3 standard errors, and does it degrade smoothly as the loss grows?
 """
 
@@ -92,8 +92,8 @@ def verdict(tl: Any, iso: Any) -> tuple[float, float, str]:
 
 
 def links(setting: Setting, runner: Runner, out: Path, K: int | None = None) -> Path:
-    """The isolated, TL and robust-TL filters of the setting's kind (``--kind``; issue 34 asks
-    for rpf) over each cell's link; ``K``: the preset's steps unless given (tests)."""
+    """The isolated, TL and robust-TL filters of the setting's kind (``--kind``; the study
+    uses rpf) over each cell's link; ``K``: the preset's steps unless given (tests)."""
     steps = {} if K is None else {"K": K}
     base = setting.config(6000, **steps)
     links_ = cells(base.Ts)

@@ -27,7 +27,7 @@ from tltrack.studies.common import Results, Runner, Setting, paired, plain, row,
 
 #: the longest truth, in seconds
 LONGEST_S = 1200.0
-#: a run whose overall RMSE passes this has diverged [m] (issue 31's criterion)
+#: a run whose overall RMSE passes this has diverged [m] (the study's criterion)
 DIVERGED_M = 100.0
 FILTERS = ("rpf", "tl-rpf", "ukf", "tl-ukf")
 
