@@ -56,12 +56,53 @@ def test_experiment_writes_results_and_figures(tmp_path):
         (["--truth", "sometimes"], "truth"),
         (["--filters", "pf,kalman"], "kalman"),
         (["--source-intensity", "0"], "intensity"),
+        (["--filters", ","], "--filters: name at least one filter"),
+        (["--filters", "pf,ukf,pf"], "['pf'] named twice"),
+        (["--clutter-rate", "1e9", "--pd", "0.9"], "clutter_rate"),
+        (["--runs", "100000000"], "runs"),
+        (["--batch-size", "0"], "--batch-size"),
+        (["--workers", "0"], "--workers"),
     ],
 )
 def test_bad_options_are_refused_naming_the_field(tmp_path, args, needle):
     r = runner.invoke(app, ["experiment", "--runs", "1", "--out", str(tmp_path), *args])
     assert r.exit_code == 2
-    assert needle in r.output
+    assert needle in " ".join(r.output.split()), r.output
+
+
+def test_a_source_may_not_take_the_primarys_id(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[[sources]]\nid = "primary"\n')
+    r = runner.invoke(app, ["experiment", "--config", str(cfg), "--out", str(tmp_path)])
+    assert "the id 'primary' is the primary's own sensor's" in " ".join(r.output.split())
+    assert r.exit_code == 2
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["experiment", "--runs", "1", "--particles", "100"],
+        ["study", "robust", "--runs", "1", "--particles", "100"],
+        ["reproduce", "--runs", "1", "--losses-only"],
+        ["fit", "--truth-file", "examples/tracks/sim-turn-sequence.csv"],
+    ],
+)
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path, args):
+    """Not a traceback at the end that loses the results: refused at once, naming it."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    out = blocker / ("f.toml" if args[0] == "fit" else "out")  # under a file: never a folder
+    r = runner.invoke(app, [*args, "--out", str(out)])
+    assert r.exit_code == 2, r.output
+    assert f"--out{out}" in "".join(r.output.split()), r.output  # wrapped anywhere
+    assert "runs" not in r.output.lower().replace("--runs", ""), "refused after the work began"
+
+
+@pytest.mark.parametrize("ts", ["nan", "0", "-1", "inf"])
+def test_fit_refuses_a_period_that_is_not_one(tmp_path, ts):
+    track = "examples/tracks/sim-turn-sequence.csv"
+    r = runner.invoke(app, ["fit", "--truth-file", track, "--model", "modes", "--ts", ts])
+    assert r.exit_code == 2 and "--ts must be a finite period > 0 s" in r.output, r.output
 
 
 def test_help_has_examples():
@@ -177,3 +218,18 @@ def test_progress_in_a_log_file_is_a_line_a_minute(monkeypatch):
     lines = [s for s in log.getvalue().splitlines() if s.startswith("sweep: ")]
     assert len(lines) == 1, log.getvalue()
     assert re.fullmatch(r"sweep: 4/10 \(40%\) after 0:00:0\d, about 0:00:\d\d left", lines[0])
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("[1]", "unsupported results schema None"),
+        ('{"schema_version": 0}', "unsupported results schema 0"),
+        ("{", "cannot read"),
+    ],
+)
+def test_plot_refuses_a_file_that_is_not_a_results_json(tmp_path, text, says):
+    bad = tmp_path / "results.json"
+    bad.write_text(text)
+    r = runner.invoke(app, ["plot", str(bad)])
+    assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output

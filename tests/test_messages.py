@@ -238,6 +238,21 @@ def test_transfer_bad_shapes(field: str, value: Any) -> None:
     assert reject(pack(d), Transfer) == "bad_shape"
 
 
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("eta", [1e300, 0.7]),  # finite, and it overflows the filters' squares
+        ("eta", [-5.0, 0.7]),  # a range that is not positive
+        ("eta", [1500.0, 100.0]),  # a bearing outside [-pi, pi]
+        ("P_eta", [[1e300, 0.0], [0.0, 1.0]]),
+    ],
+)
+def test_a_transfer_no_sensor_could_state_is_refused(field: str, value: Any) -> None:
+    d = raw(VALID_TRANSFER)
+    d[field] = value
+    assert reject(pack(d), Transfer) == "out_of_range"
+
+
 def test_a_transfer_describes_its_sensor_and_its_size_follows_the_kind() -> None:
     bearing = {"kind": "bearing", "position": [-3000.0, 5.0], "sigma_bearing": 1e-3}
     d = {**raw(VALID_TRANSFER), "sensor": bearing, "eta": [0.7], "P_eta": [[1e-6]]}

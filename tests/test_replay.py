@@ -42,7 +42,7 @@ def test_each_row_fills_its_own_sensors_components(tmp_path: Path) -> None:
     ("rows", "message"),
     [
         ("1,primary,,,,,\n", ":2: a bearing sensor needs bearing_rad"),
-        ("1,primary,,0.7,,,\n1,s1,-5,0.2,1,,\n", ":3: range_m must be finite and > 0"),
+        ("1,primary,,0.7,,,\n1,s1,-5,0.2,1,,\n", ":3: range_m must be finite and in (0, 1e9]"),
         ("1,primary,,4.0,,,\n", ":2: bearing_rad must be finite and in [-pi, pi]"),
         ("1,primary,,0.7,,,\n1,s1,5,0.2,nan,,\n", ":3: range_rate_mps must be finite"),
         ("1,radar,,0.7,,,\n", ":2: unknown sensor 'radar'"),

@@ -136,7 +136,9 @@ def test_track_runs_a_file_with_duplicates_empty_scans_and_a_scan_over_the_bound
     [
         ("26,primary,1000,0.5,0", ":2: k = 26 is beyond the config's K = 25"),
         ("0,primary,1000,0.5,0", ":2: need k >= 1"),
-        ("1,primary,nan,0.5,0", ":2: range_m must be finite and > 0"),
+        ("1,primary,nan,0.5,0", ":2: range_m must be finite and in (0, 1e9]"),
+        ("1,primary,1e300,0.5,0", ":2: range_m must be finite and in (0, 1e9]"),
+        ("1,primary,1000,4,0", ":2: bearing_rad must be finite and in [-pi, pi]"),
         ("1,primary,1000,east,0", ":2: a range-bearing sensor needs bearing_rad as a number"),
         ("1,radar,1000,0.5,0", ":2: unknown sensor 'radar'"),
         ("1,primary,1000,0.5,maybe", ":2: is_clutter must be 1, 0, true, false or empty"),

@@ -10,6 +10,7 @@ import typer
 
 from tltrack.app.common import (
     app,
+    checked_file,
     console,
 )
 from tltrack.live.topology import Kind as TopologyKind
@@ -17,13 +18,15 @@ from tltrack.live.topology import Kind as TopologyKind
 
 @app.command("bench-live")
 def bench_live(
-    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
-    pace: Annotated[float, typer.Option(help="steps/s for the latency run")] = 50.0,
-    steps: Annotated[int, typer.Option(help="steps of the latency episode")] = 500,
+    particles: Annotated[int, typer.Option(min=10, help="particles per PF")] = 6000,
+    pace: Annotated[float, typer.Option(min=0.1, help="steps/s for the latency run")] = 50.0,
+    steps: Annotated[int, typer.Option(min=1, help="steps of the latency episode")] = 500,
     rates: Annotated[
         str, typer.Option(help="step rates to try, ascending; the ladder stops at the first missed")
     ] = "100,200,300,500,800,1000",
-    ladder_steps: Annotated[int, typer.Option(help="steps per rung of the rate ladder")] = 5000,
+    ladder_steps: Annotated[
+        int, typer.Option(min=1, help="steps per rung of the rate ladder")
+    ] = 5000,
     filters: Annotated[str, typer.Option(help="particle filter kinds, comma-separated")] = "rpf,pf",
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
     topology: Annotated[
@@ -42,6 +45,9 @@ def bench_live(
 
     kinds = get_args(TopologyKind) if topology == "both" else (topology,)
     from tltrack.filters.kinds import FILTERS
+
+    if json_out:
+        checked_file(json_out, "--json")
 
     kinds_of_filter = tuple(f.strip() for f in filters.split(","))
     if unknown := [f for f in kinds_of_filter if f not in FILTERS or not FILTERS.get(f).particle]:
@@ -69,15 +75,15 @@ def bench_live(
 
 @app.command()
 def bench(
-    particles: Annotated[int, typer.Option(help="particles per PF")] = 6000,
-    repeats: Annotated[int, typer.Option(help="passes over the K steps")] = 3,
+    particles: Annotated[int, typer.Option(min=10, help="particles per PF")] = 6000,
+    repeats: Annotated[int, typer.Option(min=1, help="passes over the K steps")] = 3,
     clutter: Annotated[
         bool,
         typer.Option(
             help="instead: rpf and pf on scans of 1000 detections against their clean step"
         ),
     ] = False,
-    steps: Annotated[int, typer.Option(help="--clutter: steps per pass")] = 100,
+    steps: Annotated[int, typer.Option(min=1, help="--clutter: steps per pass")] = 100,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the figures here")] = None,
 ) -> None:
     """Time one filter step (tl-pf, pf, source-pf) against plain NumPy and Stone Soup, side by side.
@@ -85,6 +91,8 @@ def bench(
     Example: `tltrack bench --json out/bench.json` (Stone Soup needs the `stonesoup` extra);
     `tltrack bench --clutter` (tltrack.perf.clutter)
     """
+    if json_out:
+        checked_file(json_out, "--json")
     if clutter:
         from tltrack.perf.clutter import format_clutter_table, run_clutter_bench
 

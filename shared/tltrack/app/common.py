@@ -105,9 +105,10 @@ Scheduler = Annotated[
 ]
 #: ``--workers`` and ``--batch-size``, likewise.
 Workers = Annotated[
-    int | None, typer.Option(help="worker processes of the local pool (default: all cores)")
+    int | None,
+    typer.Option(min=1, help="worker processes of the local pool (default: all cores)"),
 ]
-BatchSize = Annotated[int | None, typer.Option(help="runs per vectorised batch")]
+BatchSize = Annotated[int | None, typer.Option(min=1, help="runs per vectorised batch")]
 #: ``--checkpoint``: finished batches kept in a folder, so that a stopped run resumes.
 CheckpointDir = Annotated[
     Path | None,
@@ -119,17 +120,34 @@ CheckpointDir = Annotated[
 ]
 
 
-def checked_checkpoint(folder: Path | None) -> Path | None:
-    """``--checkpoint``'s folder, refused at once (exit 2) when it cannot be written."""
+def checked_folder(folder: Path, option: str = "--out", given: Path | None = None) -> Path:
+    """An output folder, made and tried with a file at once, or refused (exit 2) naming the path
+    ``given``: a run of hours must not end in a traceback that loses its results."""
     from tltrack.engine.checkpoint import writable
 
-    if folder is not None:
-        try:
-            writable(folder)
-        except OSError as err:
-            console.print(f"[red]error:[/red] --checkpoint {folder}: {err.strerror or err}")
-            raise typer.Exit(2) from None
+    try:
+        writable(folder)
+    except OSError as err:
+        shown = given or folder
+        where = f" ({err.filename})" if err.filename and err.filename != str(shown) else ""
+        console.print(f"[red]error:[/red] {option} {shown}: {err.strerror or err}{where}")
+        raise typer.Exit(2) from None
     return folder
+
+
+def checked_file(path: Path, option: str = "--out") -> Path:
+    """An output file's path, refused at once (exit 2) when it is a folder or its folder cannot
+    be written."""
+    if path.is_dir():
+        console.print(f"[red]error:[/red] {option} {path}: a folder, not a file")
+        raise typer.Exit(2)
+    checked_folder(path.parent, option, given=path)
+    return path
+
+
+def checked_checkpoint(folder: Path | None) -> Path | None:
+    """``--checkpoint``'s folder, refused at once (exit 2) when it cannot be written."""
+    return None if folder is None else checked_folder(folder, "--checkpoint")
 
 
 @contextmanager
@@ -192,6 +210,11 @@ def filter_names(filters: str, cfg: Config) -> list[str]:
     from tltrack.engine.registry import parse
 
     names = [n.strip() for n in filters.split(",") if n.strip()]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    problem = "name at least one filter" if not names else twice and f"{twice} named twice"
+    if problem:
+        console.print(f"[red]error:[/red] --filters: {problem}")
+        raise typer.Exit(2)
     try:
         for n in names:
             parse(n, trusted=True)

@@ -12,6 +12,8 @@ from tltrack.app.access import ManifestOption, manifest_or_exit
 from tltrack.app.common import (
     app,
     build_config,
+    checked_file,
+    checked_folder,
     console,
     progress_bar,
 )
@@ -31,7 +33,7 @@ def demo(
     steps: Annotated[int | None, typer.Option(help="steps K of the episode [100]")] = None,
     particles: Annotated[int | None, typer.Option(help="particles per PF [6000]")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the summary here")] = None,
-    pace: Annotated[float, typer.Option(help="steps per second")] = 20.0,
+    pace: Annotated[float, typer.Option(min=0.1, help="steps per second")] = 20.0,
     realtime: Annotated[bool, typer.Option(help="pace at one step per Ts")] = False,
     preset: Annotated[
         str | None, typer.Option(help="paper or arasaratnam-haykin [arasaratnam-haykin]")
@@ -42,7 +44,9 @@ def demo(
     serve: Annotated[
         bool, typer.Option(help="also run the live dashboard; keep everything up until Ctrl-C")
     ] = False,
-    port: Annotated[int, typer.Option(help="dashboard port (with --serve)")] = 8050,
+    port: Annotated[
+        int, typer.Option(min=1, max=65535, help="dashboard port (with --serve)")
+    ] = 8050,
     host: Annotated[str, typer.Option(help="dashboard address (with --serve)")] = "127.0.0.1",
     topology: Annotated[
         TopologyKind, typer.Option(help="a router per operator (federated), or one for all")
@@ -65,6 +69,9 @@ def demo(
         preset, truth = preset or "arasaratnam-haykin", truth or "fixed"
         steps, particles, seed = steps or 100, particles or 6000, seed or 0
     cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
+    checked_folder(out)
+    if json_out:
+        checked_file(json_out, "--json")
     try:
         d.check_access(manifest_or_exit(manifest), cfg)
     except (ValueError, d.AccessControlMissingError) as err:

@@ -15,6 +15,7 @@ from tltrack.app.common import (
     app,
     build_config,
     checked_checkpoint,
+    checked_folder,
     console,
     engine_pool,
     filter_names,
@@ -123,6 +124,7 @@ def experiment(
     )
     names = filter_names(filters, cfg)
     checkpoint = checked_checkpoint(checkpoint)
+    checked_folder(out)
     with engine_pool(scheduler, workers) as executor, progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
         doc = run_and_save(
@@ -179,13 +181,15 @@ def plot(
 
     Example: `tltrack plot out/experiment/results.json`
     """
+    from tltrack.config import Config
     from tltrack.engine.experiment import draw
     from tltrack.engine.results import read
 
     try:
         doc = read(results_json)
-    except (OSError, ValueError, KeyError) as err:
+        cfg = Config.model_validate(doc["config"])
+    except (OSError, ValueError) as err:  # a pydantic ValidationError is a ValueError
         console.print(f"[red]error:[/red] cannot read {results_json}: {err}")
         raise typer.Exit(2) from None
-    for p in draw(doc, out or results_json.parent):
+    for p in draw(doc, checked_folder(out or results_json.parent), cfg):
         console.print(f"wrote {p}")

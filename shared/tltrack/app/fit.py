@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from tltrack.app.common import app, console
+from tltrack.app.common import app, checked_file, console
 
 
 @app.command(
@@ -42,6 +43,11 @@ def fit(
     if model not in fitting.PARAMETERS:
         console.print(f"[red]error:[/red] --model: use {', '.join(fitting.PARAMETERS)}")
         raise typer.Exit(2)
+    if not (math.isfinite(Ts) and Ts > 0):
+        console.print(f"[red]error:[/red] --ts must be a finite period > 0 s, not {Ts}")
+        raise typer.Exit(2)
+    if out is not None:
+        checked_file(out)
     tracks = []
     try:
         for path in truth_file:

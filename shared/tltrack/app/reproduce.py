@@ -14,6 +14,7 @@ from tltrack.app.common import (
     Workers,
     app,
     checked_checkpoint,
+    checked_folder,
     console,
     engine_pool,
     progress_bar,
@@ -60,6 +61,7 @@ def reproduce(
     else:
         todo, write = rep.jobs(base) + rep.loss_jobs(base), rep.report
     checkpoint = checked_checkpoint(checkpoint)
+    checked_folder(out)
     with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
         tasks = {j.label: bar.add_task(j.label, total=runs) for j in todo}
         docs = rep.run_all(

@@ -16,6 +16,7 @@ from tltrack.app.common import (
     Workers,
     app,
     checked_checkpoint,
+    checked_folder,
     console,
     engine_pool,
     progress_bar,
@@ -106,6 +107,7 @@ def study(
     }
     total = runs * configurations.get(name, 1)
     checkpoint = checked_checkpoint(checkpoint)
+    checked_folder(out)
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=total if name in configurations else None)
         runner = studies.Runner(

@@ -8,7 +8,14 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
-from tltrack.app.common import app, build_config, console, filter_names, progress_bar
+from tltrack.app.common import (
+    app,
+    build_config,
+    checked_folder,
+    console,
+    filter_names,
+    progress_bar,
+)
 
 if TYPE_CHECKING:
     from tltrack.engine.scan_file import ScanFile
@@ -86,13 +93,13 @@ def track(
     except (ScanFileError, ScansDoNotFitError) as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None
+    checked_folder(out)  # before the run: a folder that cannot be written loses nothing
     for reason in recorded.refused:
         console.print(f"[yellow]refused:[/yellow] {reason}: the filters predict through it")
     truth = file_truth(cfg) if cfg.truth == "file" else None
     with progress_bar(cfg.K, "steps") as bar:
         task = bar.add_task("steps", total=cfg.K)
         done = run_track(cfg, names, recorded, truth, lambda: bar.advance(task))
-    out.mkdir(parents=True, exist_ok=True)
     write_estimates(out / "estimates.csv", cfg.scenario, done.tracks.estimates)
     write_transfers(out / "transfers.csv", setup, done.tracks.transfers)
     wrote = [

@@ -96,6 +96,9 @@ FilterKindName = Annotated[str, AfterValidator(_filter_kind)]
 
 #: the primary operator's sensor id; a source's is its own id
 PRIMARY = "primary"
+#: the most false alarms a scan may be asked to draw on average: the clutter study's densest cell
+#: draws about 40,000; a rate of 1e9 asked for 15 GiB in a single run of 100 particles
+MAX_CLUTTER_RATE = 1_000_000
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
@@ -174,8 +177,9 @@ class DetectionSpec(BaseModel):
     clutter_rate: float = Field(
         0.0,
         ge=0,
+        le=MAX_CLUTTER_RATE,
         allow_inf_nan=False,
-        description="mean false alarms per scan (Poisson)",
+        description="mean false alarms per scan (Poisson; at most a million, the memory's bound)",
         json_schema_extra=unit("1"),
     )
     fov: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
@@ -434,7 +438,13 @@ class Config(BaseModel):
     particles: int = Field(
         6000, ge=10, le=10_000_000, description="particles per PF", json_schema_extra=unit("1")
     )
-    runs: int = Field(100, ge=1, description="Monte-Carlo runs", json_schema_extra=unit("1"))
+    runs: int = Field(
+        100,
+        ge=1,
+        le=1_000_000,
+        description="Monte-Carlo runs (at most a million: 100 times the paper's)",
+        json_schema_extra=unit("1"),
+    )
     kappa: float = Field(
         2.0, allow_inf_nan=False, description="UKF scaling parameter", json_schema_extra=unit("1")
     )
@@ -561,6 +571,8 @@ class Config(BaseModel):
         ids = [s.id for s in self.sources]
         if len(set(ids)) != len(ids):
             raise ValueError(f"sources: duplicate id in {ids}")
+        if PRIMARY in ids:
+            raise ValueError(f"sources: the id {PRIMARY!r} is the primary's own sensor's")
         sensor = self.primary_sensor
         if self.primary_position is not None and sensor is not None and sensor.position:
             raise ValueError("give either primary_position or primary_sensor.position, not both")

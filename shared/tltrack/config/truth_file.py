@@ -23,9 +23,9 @@ end the file. Times must strictly increase, but need not be regular and need not
 first report is t = 0 of the truth). Any of these refuses the whole file, naming the file and the
 line: a missing or unknown header, a wrong number of fields, a value that is not a number or is
 NaN or infinite, a time that does not increase, a latitude outside [-90, 90] or a longitude outside
-[-180, 180], a gap between consecutive reports longer than ``max_gap_s`` (default 120 s: AIS
-reports come about every minute, and an interpolation across minutes of silence would be
-invention, not truth), and fewer than 3 reports.
+[-180, 180], an x or y beyond 1e9 m (:mod:`tltrack.models.components`), a gap between consecutive
+reports longer than ``max_gap_s`` (default 120 s: AIS reports come about every minute, and an
+interpolation across minutes of silence would be invention, not truth), and fewer than 3 reports.
 
 Resampling
 ----------
@@ -111,6 +111,7 @@ from numpy.typing import NDArray
 
 from tltrack.config.schema import Config
 from tltrack.models.angles import wrap_angle
+from tltrack.models.components import MAX_MAGNITUDE
 from tltrack.models.kinds import MOTIONS
 
 Array = NDArray[np.float64]
@@ -260,6 +261,8 @@ def read_track(path: str | Path, max_gap_s: float = DEFAULT_MAX_GAP_S) -> Track:
             raise fail(i, f"lat = {a} is outside [-90, 90]")
         if geographic and not -180.0 <= b <= 180.0:
             raise fail(i, f"lon = {b} is outside [-180, 180]")
+        if not geographic and max(abs(a), abs(b)) > MAX_MAGNITUDE:
+            raise fail(i, f"x, y = {a:g}, {b:g}: a coordinate beyond {MAX_MAGNITUDE:g} m")
         if rows:
             dt = t - rows[-1][0]
             if dt <= 0:

@@ -41,9 +41,10 @@ def run_and_save(
     return doc
 
 
-def draw(doc: dict[str, Any], out: Path) -> list[Path]:
-    """The figures of one results document (also what ``tltrack plot`` redraws)."""
-    cfg = Config.model_validate(doc["config"])
+def draw(doc: dict[str, Any], out: Path, cfg: Config | None = None) -> list[Path]:
+    """The figures of one results document (also what ``tltrack plot`` redraws); ``cfg``: its
+    config, already validated."""
+    cfg = cfg or Config.model_validate(doc["config"])
     names = [n for n in doc["filters"] if "/" not in n]
     tracks = trace_run(cfg, [n for n in names if not n.startswith("source-")], run=0)
     setup = Setup(cfg)

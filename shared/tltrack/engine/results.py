@@ -113,7 +113,17 @@ def write(doc: dict[str, Any], out_dir: Path) -> Path:
 
 
 def read(path: Path) -> dict[str, Any]:
+    """A results document, refused (``ValueError``) unless it has what its figures are drawn from:
+    the config, and each filter's RMSE per step and overall."""
     doc = json.loads(Path(path).read_text())
-    if doc.get("schema_version") != SCHEMA_VERSION:
-        raise ValueError(f"{path}: unsupported results schema {doc.get('schema_version')!r}")
+    if not isinstance(doc, dict) or doc.get("schema_version") != SCHEMA_VERSION:
+        version = doc.get("schema_version") if isinstance(doc, dict) else None
+        raise ValueError(f"{path}: unsupported results schema {version!r}")
+    filters = doc.get("filters")
+    if not isinstance(doc.get("config"), dict) or not isinstance(filters, dict) or not filters:
+        raise ValueError(f"{path}: no config, or no filters' results")
+    for name, r in filters.items():
+        per_step = r.get("rmse_per_step") if isinstance(r, dict) else None
+        if not isinstance(per_step, list) or not isinstance(r.get("rmse_overall"), int | float):
+            raise ValueError(f"{path}: filters.{name} lacks rmse_per_step or rmse_overall")
     return doc

@@ -20,7 +20,8 @@ with no row for a sensor is an empty scan: the sensor saw nothing. The filters p
 (the measurement-set likelihood of no detection is the same for every state the sensor sees, and
 PDA keeps the prediction), so an empty scan is not an error.
 
-A malformed row (a missing or non-numeric field, a NaN, a step beyond K, an unknown sensor) refuses
+A malformed row (a missing or non-numeric field, a NaN, a value no sensor can measure
+(:mod:`tltrack.models.components`), a step beyond K, an unknown sensor) refuses
 the whole file, naming its line, before any filter runs. A scan of more than
 :data:`~tltrack.models.scan.MAX_DETECTIONS` detections is refused alone, with the line where it
 went over: the filters predict through that step, as through a scan that never arrived, and
@@ -31,23 +32,19 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.models import components
 from tltrack.models.base import MeasurementModel
 from tltrack.models.scan import MAX_DETECTIONS
 
 Array = NDArray[np.float64]
 TRUE, FALSE = {"1", "true", "True", "TRUE"}, {"0", "false", "False", "FALSE"}
-#: what a component's value must satisfy, beyond being a finite number
-CHECKS: dict[str, tuple[Callable[[float], bool], str]] = {
-    "range_m": (lambda v: v > 0, "finite and > 0"),
-    "bearing_rad": (lambda v: abs(v) <= math.pi, "finite and in [-pi, pi]"),
-}
 
 
 class ScanFileError(ValueError):
@@ -161,8 +158,8 @@ def _number(path: Path, line: int, row: dict[str, str], name: str, kind: str) ->
         raise ScanFileError(
             f"{path}:{line}: a {kind} sensor needs {name} as a number, not {row[name]!r}"
         ) from None
-    ok, want = CHECKS.get(name, (lambda v: True, "finite"))
-    if not (math.isfinite(v) and ok(v)):
+    want = components.problem(name, v)
+    if want is not None:
         raise ScanFileError(f"{path}:{line}: {name} must be {want}, not {row[name]!r}")
     return v
 

@@ -29,6 +29,7 @@ from tltrack.filters.base import Array, Estimate
 from tltrack.live.held import Handling, Held
 from tltrack.live.service import Service
 from tltrack.models.base import Layout, PositionFix
+from tltrack.models.components import first_problem
 from tltrack.models.observation import Observation
 from tltrack.models.scan import Statement
 from tltrack.wire.messages import (
@@ -184,6 +185,10 @@ class SourceEpisode:
         return self.own.model.n_z
 
     @property
+    def components(self) -> tuple[str, ...]:
+        return tuple(self.own.model.components)
+
+    @property
     def one_detection(self) -> bool:
         return self.own.detection.trivial
 
@@ -315,6 +320,10 @@ class PrimaryEpisode:
         return self.own.model.n_z
 
     @property
+    def components(self) -> tuple[str, ...]:
+        return tuple(self.own.model.components)
+
+    @property
     def one_detection(self) -> bool:
         return self.own.detection.trivial
 
@@ -397,6 +406,9 @@ class Sensing(Protocol):
 
     @property
     def n_z(self) -> int: ...
+
+    @property
+    def components(self) -> tuple[str, ...]: ...
 
     @property
     def one_detection(self) -> bool:
@@ -507,7 +519,8 @@ class TrackedEpisodes(Episodes[E]):
     def offer(self, e: str, key: str, z: Measurement, rejects: RejectCounter) -> None:
         """Queue ``z`` in its episode's step order; held while the episode is not yet open.
 
-        A measurement of the wrong size for the sensor, a duplicate, a stale step, one far
+        A measurement of the wrong size for the sensor, one with a value no sensor measures
+        (:mod:`tltrack.models.components`), a duplicate, a stale step, one far
         ahead, one of an episode closed here, or one the hold cannot keep (:mod:`tltrack.live.held`)
         is counted under its key.
         """
@@ -518,6 +531,9 @@ class TrackedEpisodes(Episodes[E]):
         own = ep.tracker
         if any(len(d) != own.n_z for d in z.z) or (own.one_detection and len(z.z) != 1):
             rejects.add(key, "bad_shape")
+            return
+        if any(first_problem(own.components, d) for d in z.z):
+            rejects.add(key, "out_of_range")
             return
         verdict = ep.steps.offer(z.k, z)
         if verdict != "accepted":

@@ -33,6 +33,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 from tltrack.config import SensorSpec
+from tltrack.models import components
 from tltrack.models.kinds import MOTIONS, SENSORS
 from tltrack.models.scan import MAX_DETECTIONS
 
@@ -73,6 +74,7 @@ REASONS = (
     "bad_shape",  # wrong vector/matrix dimensions
     "scan_too_large",  # a scan of more than MAX_DETECTIONS detections
     "non_finite",  # NaN or infinity
+    "out_of_range",  # a value no sensor measures: a range <= 0, 1e300 m (tltrack.models.components)
     "not_symmetric",  # covariance asymmetric beyond SYMMETRY_RTOL
     "not_spd",  # covariance not positive-definite (Cholesky failed)
     "unknown_kind",  # names a sensor, motion or filter kind the receiver has not registered
@@ -313,7 +315,12 @@ class Transfer(Message):
             )
         n_z = self.sensor.n_z
         _check_vector(self.eta, (n_z,), "eta")
+        bad = components.first_problem(SENSORS.get(self.sensor.kind).components, self.eta)
+        if bad is not None:
+            raise PydanticCustomError("out_of_range", f"eta: {bad}")
         _check_covariance(self.P_eta, n_z, "P_eta")
+        if any(abs(p) > components.MAX_MAGNITUDE**2 for row in self.P_eta for p in row):
+            raise PydanticCustomError("out_of_range", "P_eta has an entry beyond 1e18")
         return self
 
 
