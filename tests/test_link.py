@@ -116,10 +116,36 @@ def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
         path.write_text(json.dumps({"cut": False}))
         apply_control(link, read_control(path))
         assert not link.is_cut
-    for bad, named in (({"loss": 0.1}, "loss"), ({"cut": 1}, "cut"), ([], "object")):
+    nan, inf = float("nan"), float("inf")  # json.dumps writes NaN and Infinity, json reads them
+    for bad, named in (
+        ({"loss": 0.1}, "loss"),
+        ({"cut": 1}, "cut"),
+        ([], "object"),
+        ({"delay_ms": nan}, "delay_ms must be finite and >= 0"),
+        ({"jitter_ms": -1}, "jitter_ms must be finite and >= 0"),
+        ({"delay_ms": inf}, "delay_ms must be finite"),
+        ({"rate_kbps": 0}, "rate_kbps must be finite and > 0"),
+    ):
         path.write_text(json.dumps(bad))
         with pytest.raises(ValueError, match=named):
             read_control(path)
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["--to", "tcp/127.0.0.1:1", "--listen", ":99999"], "--listen ':99999'"),
+        (["--to", "tcp/127.0.0.1:1", "--listen", "bogus"], "--listen 'bogus'"),
+        (["--to", "bogus"], "--to 'bogus'"),
+        (["--to", "tcp/127.0.0.1:99999"], "--to 'tcp/127.0.0.1:99999'"),
+    ],
+)
+def test_link_refuses_an_endpoint_naming_the_option(args, says):
+    from tltrack.app import app
+    from typer.testing import CliRunner
+
+    r = CliRunner().invoke(app, ["link", *args])
+    assert r.exit_code == 2 and says in r.output, r.output
 
 
 def test_two_missed_heartbeats_cut_a_link_and_the_next_restores_it():

@@ -125,6 +125,14 @@ def test_the_database_comes_from_the_scorers_variable(
     assert r.exit_code == 0 and len(r.stdout.splitlines()) == 8
 
 
+def _a_damaged_row(tmp_path: Path) -> Path:
+    p = tmp_path / "scorer.sqlite"
+    scorer_file(p).close()
+    with sqlite3.connect(p) as con:
+        con.execute("UPDATE estimates SET pos = '[1]' WHERE k = 2 AND filter = 'rpf'")
+    return p
+
+
 def _not_the_scorers(tmp_path: Path) -> Path:
     p = tmp_path / "other.sqlite"
     with sqlite3.connect(p) as con:
@@ -140,8 +148,9 @@ def _not_the_scorers(tmp_path: Path) -> Path:
         (lambda tmp: (tmp / "notes.txt").write_text("not sqlite" * 100) and tmp / "notes.txt",
          "not an SQLite database"),
         (_not_the_scorers, "not a scorer's database"),
+        (_a_damaged_row, "a position is two numbers, not '[1]'"),
     ],
-    ids=["missing", "directory", "text", "other-sqlite"],
+    ids=["missing", "directory", "text", "other-sqlite", "damaged-row"],
 )  # fmt: skip
 def test_bad_input_exits_2_with_the_reason(tmp_path: Path, make: Any, needle: str) -> None:
     db = make(tmp_path)

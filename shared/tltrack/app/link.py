@@ -41,13 +41,14 @@ def link(
     import time
 
     from tltrack.live import supervisor
-    from tltrack.live.link import LinkEmulator, Shape, apply_control, read_control
+    from tltrack.live.link import LinkEmulator, Shape, apply_control, host_port, read_control
 
-    host, _, port = listen.rpartition(":")
     try:
+        host_port(to, "--to")
+        address = host_port(listen, "--listen", listen=True)
         rate = None if rate_kbps is None else rate_kbps * 1e3
         shape = Shape(delay_ms / 1e3, jitter_ms / 1e3, rate)
-        emulator = LinkEmulator(to, (host or "127.0.0.1", int(port)), shape=shape, seed=seed)
+        emulator = LinkEmulator(to, address, shape=shape, seed=seed)
     except (ValueError, OSError) as err:
         console.print(f"[red]error:[/red] {err}")
         raise typer.Exit(2) from None

@@ -106,10 +106,16 @@ def _write_jsonl(conn: sqlite3.Connection, db: Path, episode: str | None, jsonl:
 
 @contextlib.contextmanager
 def _output(path: Path) -> Iterator[TextIO]:
-    """``path`` opened for writing, or stdout for ``-``."""
+    """``path`` opened for writing, or stdout for ``-``. The file appears whole or not at all: a
+    row that cannot be read leaves no half-written file (nor clobbers an older one)."""
     if str(path) == "-":
         yield sys.stdout
         return
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w") as f:
-        yield f
+    part = path.with_name(f".{path.name}.part")
+    try:
+        with part.open("w") as f:
+            yield f
+        part.replace(path)
+    finally:
+        part.unlink(missing_ok=True)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import queue
 import random
 import socket
@@ -96,8 +97,7 @@ class LinkEmulator:
         seed: int | None = None,
         tap: Callable[[Way], Tap | None] | None = None,
     ) -> None:
-        host, port = target.split("/", 1)[-1].rsplit(":", 1)
-        self.target = (host, int(port))
+        self.target = host_port(target, "target")
         self._shapes: dict[Way, Shape] = {"forward": shape or Shape(), "back": shape or Shape()}
         self._rng = random.Random(seed)
         self._tap = tap
@@ -264,12 +264,25 @@ def read_control(path: Path) -> dict[str, Any]:
         if name in raw and not isinstance(raw[name], bool):
             raise ValueError(f"{path}: {name} must be true or false")
     for name in ("delay_ms", "jitter_ms", "rate_kbps"):
-        value = raw.get(name)
-        if value is None and name == "rate_kbps":
+        if name not in raw or (raw[name] is None and name == "rate_kbps"):
             continue
-        if name in raw and (isinstance(value, bool) or not isinstance(value, int | float)):
+        value = raw[name]
+        if isinstance(value, bool) or not isinstance(value, int | float):
             raise ValueError(f"{path}: {name} must be a number")
+        rate = name == "rate_kbps"  # a cap of 0 would stall the link for good
+        if not (math.isfinite(value) and (value > 0 if rate else value >= 0)):
+            raise ValueError(f"{path}: {name} must be finite and {'> 0' if rate else '>= 0'}")
     return raw
+
+
+def host_port(text: str, option: str, *, listen: bool = False) -> tuple[str, int]:
+    """``[tcp/]HOST:PORT`` as (host, port), or ``ValueError`` naming ``option``. Where to
+    ``listen``, the host may be left out (127.0.0.1) and the port may be 0 (any free one)."""
+    host, sep, port = text.split("/", 1)[-1].rpartition(":")
+    low = 0 if listen else 1
+    if not (sep and (host or listen) and port.isdigit() and low <= int(port) <= 65535):
+        raise ValueError(f"{option} {text!r}: HOST:PORT with a port in {low}..65535")
+    return host or "127.0.0.1", int(port)
 
 
 def apply_control(link: LinkEmulator, control: dict[str, Any]) -> None:

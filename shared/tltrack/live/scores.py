@@ -47,6 +47,15 @@ def squared_error(pos: Sequence[float], truth: Sequence[float]) -> float:
     return dx**2 + dy**2  # ** as NumPy's scalars square: the summary's RMSE, bit for bit
 
 
+def _position(text: str) -> list[float]:
+    """A stored position, or ValueError: a damaged or foreign row must not end in a traceback."""
+    pos = json.loads(text)
+    numbers = isinstance(pos, list) and all(isinstance(v, int | float) for v in pos)
+    if not (numbers and len(pos) == 2):
+        raise ValueError(f"a position is two numbers, not {text[:40]!r}")
+    return pos
+
+
 @dataclass(frozen=True)
 class StepScore:
     """One filter at one step of one episode."""
@@ -96,7 +105,7 @@ def step_scores(db: sqlite3.Connection, episode: str | None = None) -> Iterator[
     for ep, name, k, pos, truth, t_sensor, t_recv, used in rows:
         error = None
         if pos is not None and truth is not None:
-            error = math.sqrt(squared_error(json.loads(pos), json.loads(truth)))
+            error = math.sqrt(squared_error(_position(pos), _position(truth)))
         yield StepScore(ep, name, k, error, latency.end_to_end_ms(t_sensor, t_recv), bool(used))
 
 
@@ -121,6 +130,9 @@ def estimates(db: sqlite3.Connection, episode: str | None = None) -> tuple[str, 
     for k, name, x, P in db.execute(query, (episode,)):
         mean, cov = np.asarray(json.loads(x), dtype=float), np.asarray(json.loads(P), dtype=float)
         if mean.shape != (n_x,) or cov.shape != (n_x, n_x):
-            raise ValueError(f"{name} at k = {k}: a state of {mean.size}, not {scenario}'s {n_x}")
+            raise ValueError(
+                f"{name} at k = {k}: a state of shape {mean.shape} and a covariance of "
+                f"{cov.shape}, not {scenario}'s ({n_x},) and ({n_x}, {n_x})"
+            )
         out.append((k, name, mean, cov))
     return scenario, out
