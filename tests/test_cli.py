@@ -233,3 +233,20 @@ def test_plot_refuses_a_file_that_is_not_a_results_json(tmp_path, text, says):
     bad.write_text(text)
     r = runner.invoke(app, ["plot", str(bad)])
     assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
+
+
+@pytest.mark.parametrize(
+    ("content", "name", "says", "not_said"),
+    [
+        (b"\xff\xfe", "c.toml", "not UTF-8 text", "codec"),
+        (b"a: 1\n", "c.yaml", "not valid JSON (a config is .toml, or else JSON)", "YAML"),
+        (b'preset = "bogus"\n', "c.toml", "preset: Input should be", "Field required"),
+        (b"[primary_detection]\npd = nan\n", "c.toml", "pd: Input should be a finite", "<= 1"),
+    ],
+)
+def test_a_bad_config_file_is_named_with_its_one_problem(tmp_path, content, name, says, not_said):
+    cfg = tmp_path / name
+    cfg.write_bytes(content)
+    r = runner.invoke(app, ["experiment", "--config", str(cfg), "--out", str(tmp_path)])
+    said = " ".join(r.output.split())
+    assert r.exit_code == 2 and says in said and not_said not in said, r.output

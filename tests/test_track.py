@@ -190,3 +190,13 @@ def test_with_a_truth_file_track_writes_the_scores_of_its_estimates(tmp_path: Pa
     err = [np.hypot(float(r["x_m"]) - x[int(r["k"]), 0], float(r["y_m"]) - x[int(r["k"]), 2])
            for r in est]  # fmt: skip
     np.testing.assert_allclose(scores["rmse_per_step"], err, rtol=1e-9)
+
+
+def test_a_scan_file_saved_with_a_byte_order_mark_reads_as_without(recorded, tmp_path) -> None:
+    """Spreadsheets save CSV with a UTF-8 BOM; truth files already accept one."""
+    cfg, _run, path = recorded
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    plain, marked = read_scans(path, sensors(cfg), cfg.K), read_scans(bom, sensors(cfg), cfg.K)
+    for sid, scans in plain.detections.items():
+        assert all(np.array_equal(a, b) for a, b in zip(scans, marked.detections[sid], strict=True))

@@ -53,7 +53,7 @@ def study(
         Path | None, typer.Option(help="a recorded track as the truth (not realizations)")
     ] = None,
     particles: Annotated[
-        int | None, typer.Option(help="particles per PF (default: the study's own)")
+        int | None, typer.Option(min=10, help="particles per PF (default: the study's own)")
     ] = None,
     realizations: Annotated[int, typer.Option(help="realizations (study realizations)")] = 100,
     filters: Annotated[

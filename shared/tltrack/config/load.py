@@ -68,18 +68,21 @@ def complete_from_truth_file(data: Mapping[str, Any], *, trusted: bool = False) 
 
 
 def read_mapping(path: str | Path) -> dict[str, Any]:
-    """The top-level table of a TOML or JSON config file (by extension), not yet validated."""
+    """The top-level table of a TOML (``.toml``) or JSON (any other name) config file, not yet
+    validated."""
     p = Path(path)
+    toml = p.suffix.lower() == ".toml"
     try:
-        text = p.read_text()
+        text = p.read_text(encoding="utf-8")
     except OSError as err:
         raise ConfigError(f"cannot read config file {p}: {err.strerror}") from None
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{p}: not UTF-8 text (byte {err.start}), so not a config") from None
     try:
-        data = tomllib.loads(text) if p.suffix.lower() == ".toml" else json.loads(text)
+        data = tomllib.loads(text) if toml else json.loads(text)
     except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
-        raise ConfigError(
-            f"{p}: not valid {p.suffix.lstrip('.').upper() or 'JSON'}: {err}"
-        ) from None
+        also = "" if toml or p.suffix.lower() == ".json" else " (a config is .toml, or else JSON)"
+        raise ConfigError(f"{p}: not valid {'TOML' if toml else 'JSON'}{also}: {err}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: the top level must be a table/object")
     return data

@@ -171,6 +171,7 @@ class DetectionSpec(BaseModel):
         1.0,
         gt=0,
         le=1,
+        allow_inf_nan=False,
         description="probability of detecting the target in a scan",
         json_schema_extra=unit("1"),
     )
@@ -202,6 +203,7 @@ class LinkSpec(BaseModel):
         0.0,
         ge=0,
         le=1,
+        allow_inf_nan=False,
         description="probability that a transfer is lost",
         json_schema_extra=unit("1"),
     )
@@ -482,6 +484,7 @@ class Config(BaseModel):
         None,
         gt=0,
         le=1,
+        allow_inf_nan=False,
         description="robust TL: at most this share of steps with a transfer",
         json_schema_extra=unit("1"),
     )
@@ -710,8 +713,12 @@ def describe_validation_error(err: ValidationError) -> str:
     """One line per problem, each starting with the field's dotted path."""
     lines = []
     errors = err.errors()
-    if any(e["type"] == "unknown_kind" and e["loc"] == ("scenario",) for e in errors):
-        errors = [e for e in errors if e["type"] != "missing"]  # no defaults without a scenario
+    unknown_base = any(
+        (e["loc"] == ("scenario",) and e["type"] == "unknown_kind") or e["loc"] == ("preset",)
+        for e in errors
+    )
+    if unknown_base:  # no defaults without a scenario and a preset: say only which is unknown
+        errors = [e for e in errors if e["type"] != "missing"]
     for e in errors:
         loc = ".".join(str(p) for p in e["loc"]) or "(config)"
         lines.append(f"{loc}: {e['msg']}")

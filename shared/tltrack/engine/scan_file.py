@@ -83,7 +83,7 @@ def read_scans(
     labels: dict[tuple[str, int], list[bool | None]] = {}
     over: dict[tuple[str, int], int] = {}  #: scan -> the line where it went over the bound
     try:
-        with open(path, newline="") as fh:
+        with open(path, newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's BOM too
             reader = csv.DictReader(fh)
             header = reader.fieldnames or []
             needed = sorted({c for s in sensors.values() for c in s.components})
@@ -156,7 +156,8 @@ def _number(path: Path, line: int, row: dict[str, str], name: str, kind: str) ->
         v = float(row[name])
     except (TypeError, ValueError):
         raise ScanFileError(
-            f"{path}:{line}: a {kind} sensor needs {name} as a number, not {row[name]!r}"
+            f"{path}:{line}: a {kind} sensor needs {name} as a number, not "
+            + (repr(row[name]) if row[name] is not None else "a missing field (a short row)")
         ) from None
     want = components.problem(name, v)
     if want is not None:
