@@ -128,6 +128,8 @@ WRONG_VALUES: list[Any] = [
 ]
 BAD_IDS = ["", "a/b", "x" * 65, "é", "*", "$x", "tltrack/**", " "]
 NON_FINITE = [math.nan, math.inf, -math.inf]
+#: finite, and beyond anything a sensor measures (tltrack.models.components)
+ABSURD = [1e300, -1e300]
 
 
 def _pack(obj: Any) -> bytes:
@@ -159,8 +161,8 @@ def _set(d: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
 
 
 def _structured(rnd: random.Random, kind: str) -> bytes:
-    """A template with one field broken: version, tag, type, shape, NaN/Inf, covariance, ids,
-    a field missing or extra."""
+    """A template with one field broken: version, tag, type, shape, NaN/Inf or an absurd value,
+    covariance, ids, a field missing or extra."""
     d = json.loads(json.dumps(TEMPLATES[kind]))  # deep copy
     field = rnd.choice(sorted(d))
     how = rnd.randrange(9)
@@ -188,7 +190,7 @@ def _structured(rnd: random.Random, kind: str) -> bytes:
             ]
         )
     elif how == 4 and (paths := _numeric_paths(d)):
-        _set(d, rnd.choice(paths), rnd.choice(NON_FINITE))
+        _set(d, rnd.choice(paths), rnd.choice(NON_FINITE + ABSURD))
     elif how == 5 and ("P" in d or "P_eta" in d):
         f = "P" if "P" in d else "P_eta"
         n = len(d[f])

@@ -97,3 +97,17 @@ def test_the_cli_records_the_file_and_its_hash(tmp_path: Path) -> None:
     assert len(doc["truth"]["sha256"]) == 64 and doc["config"]["truth"] == "file"
     bad = CliRunner().invoke(app, [*argv, "--truth", "fixed", "--out", str(out)])
     assert bad.exit_code == 2 and "either truth_file or truth" in bad.output
+
+
+def test_a_config_files_truth_file_is_found_from_that_files_folder(tmp_path, monkeypatch) -> None:
+    """As its author wrote it, wherever the command runs; an option given beside stays as given."""
+    import shutil
+
+    folder = tmp_path / "study"
+    folder.mkdir()
+    shutil.copy(SHIP, folder / "ship.csv")
+    (folder / "c.toml").write_text('truth_file = "ship.csv"\nscenario = "cv"\n')
+    monkeypatch.chdir(tmp_path)
+    cfg = load_config(folder / "c.toml")
+    assert cfg.truth == "file" and cfg.truth_file == folder / "ship.csv"
+    assert load_config(folder / "c.toml", truth_file=str(SHIP)).truth_file == SHIP

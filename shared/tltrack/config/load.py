@@ -29,6 +29,9 @@ def load_config(path: str | Path | None = None, **overrides: Any) -> Config:
     on top, completed from its truth file if it has one; raises ``ValueError`` naming the field,
     the file or its line."""
     data = read_mapping(path) if path is not None else {}
+    given = data.get("truth_file")
+    if path is not None and isinstance(given, str) and not Path(given).is_absolute():
+        data["truth_file"] = str(Path(path).parent / given)  # as the file's author sees it
     data |= {k: v for k, v in overrides.items() if v is not None}
     return make_config(complete_from_truth_file(data, trusted=True), trusted=True)
 

@@ -420,7 +420,9 @@ class Config(BaseModel):
         0, ge=0, description="seed of the fixed truth", json_schema_extra=unit("1")
     )
     truth_file: Path | None = Field(
-        None, description="a recorded track (CSV t,x,y or t,lat,lon) as the truth"
+        None,
+        description="a recorded track (CSV t,x,y or t,lat,lon) as the truth; a relative path in "
+        "a config file is from that file's folder",
     )
     truth_origin: tuple[Latitude, Longitude] | None = Field(
         None,
