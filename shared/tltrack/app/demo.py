@@ -33,7 +33,9 @@ def demo(
     steps: Annotated[int | None, typer.Option(help="steps K of the episode [100]")] = None,
     particles: Annotated[int | None, typer.Option(help="particles per PF [6000]")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the summary here")] = None,
-    pace: Annotated[float, typer.Option(min=0.1, help="steps per second")] = 20.0,
+    pace: Annotated[
+        float, typer.Option(min=0, help="steps per second; 0: as fast as possible")
+    ] = 20.0,
     realtime: Annotated[bool, typer.Option(help="pace at one step per Ts")] = False,
     preset: Annotated[
         str | None, typer.Option(help="paper or arasaratnam-haykin [arasaratnam-haykin]")
