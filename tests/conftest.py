@@ -82,4 +82,4 @@ def _kinds_imported_by_a_test_stay_in_that_test() -> Iterator[None]:
     yield
     for concept, (kinds, imported, loaded) in saved.items():
         r = plugins.REGISTRIES[concept]
-        r._kinds, r.imported, r._plugins_loaded = kinds, imported, loaded
+        r._found, r.imported, r._plugins_loaded = kinds, imported, loaded

@@ -1,4 +1,4 @@
-"""tltrack.live.tracking.Episodes, the table of episodes every live service keeps: a sample that
+"""tltrack.live.episodes.Episodes, the table of episodes every live service keeps: a sample that
 overtakes its episode's start is held and handled once it opens; one of an episode closed here
 (declined, retired or evicted) is counted at once, never held; one whose episode never starts is
 counted once it has waited too long (tltrack.live.held)."""
@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 import pytest
 from doubles import episode_end, episode_start, received
 from tltrack.config import Config, make_config
+from tltrack.live.episodes import Episodes, StepQueue, TrackedEpisodes
 from tltrack.live.held import Held
-from tltrack.live.tracking import Episodes, SourceEpisode, StepQueue, TrackedEpisodes
+from tltrack.live.tracking import SourceEpisode
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeStart, Measurement, RejectCounter
 

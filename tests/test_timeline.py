@@ -15,10 +15,10 @@ from tltrack.config.timeline import US
 from tltrack.engine.driver import Sources
 from tltrack.engine.montecarlo import run_batch, trace_run
 from tltrack.engine.results import assemble
-from tltrack.engine.scan_file import ScanFile
+from tltrack.engine.scan_file import ScanFile, ScansDoNotFitError
 from tltrack.engine.scenario import sampled, simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.engine.track import ScansDoNotFitError, track
+from tltrack.engine.track import track
 from tltrack.live.tracking import SourceEpisode
 from tltrack.services.primary_tracker import tracker as primary_svc
 from tltrack.wire import keys

@@ -14,10 +14,10 @@ from tltrack.app import app
 from tltrack.config import Config, load_config, make_config
 from tltrack.config.truth_file import file_truth
 from tltrack.engine.montecarlo import trace_run
-from tltrack.engine.scan_file import ScanFileError, read_scans
+from tltrack.engine.scan_file import ScanFileError, ScansDoNotFitError, read_scans
 from tltrack.engine.scenario import Run, simulate
 from tltrack.engine.setup import PRIMARY, Setup
-from tltrack.engine.track import ScansDoNotFitError, track
+from tltrack.engine.track import track
 from tltrack.models.scan import MAX_DETECTIONS
 from typer.testing import CliRunner
 

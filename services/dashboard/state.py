@@ -20,7 +20,7 @@ from typing import Any, Literal
 
 import numpy as np
 from tltrack.config.timeline import Timeline
-from tltrack.engine.driver import operator_of
+from tltrack.engine.names import operator_of
 from tltrack.engine.setup import PRIMARY, sensor_spec
 from tltrack.filters import consistency
 from tltrack.live import latency

@@ -28,7 +28,8 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.heartbeat import LinkWatch
 from tltrack.live.service import Service, load_settings, setup_logging
-from tltrack.live.tracking import PrimaryEpisode, StepQueue, StepReport, TrackedEpisodes
+from tltrack.live.episodes import StepQueue, TrackedEpisodes
+from tltrack.live.tracking import PrimaryEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule, Transfer
 from tltrack.wire.transport import Received, ZenohSettings, decode_received

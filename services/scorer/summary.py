@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tltrack.config import make_config
 from tltrack.config.timeline import Timeline
-from tltrack.engine.driver import operator_of
+from tltrack.engine.names import operator_of
 from tltrack.filters import consistency
 from tltrack.live import latency
 from tltrack.live.scores import squared_error

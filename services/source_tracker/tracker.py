@@ -18,12 +18,8 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.heartbeat import HeartbeatSender
 from tltrack.live.service import Service, load_settings, setup_logging
-from tltrack.live.tracking import (
-    SourceEpisode,
-    StepQueue,
-    StepReport,
-    TrackedEpisodes,
-)
+from tltrack.live.episodes import StepQueue, TrackedEpisodes
+from tltrack.live.tracking import SourceEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule
 from tltrack.wire.transport import Received, ZenohSettings, decode_received

@@ -91,38 +91,50 @@ class Registry(Generic[T]):
 
     ``name_of`` reads a class's declared kind; ``check`` refuses a class that lacks what the
     concept needs (with the reason as a ValueError), so a bad plugin fails when it is loaded.
+    ``builtins`` may be a function that returns them: they are then imported on first use, so a
+    process that never asks for a kind never loads them (a service that does not filter never
+    imports the filters, nor numba, which they compile with).
     """
 
     def __init__(
         self,
         concept: str,
         group: str,
-        builtins: Iterable[T],
+        builtins: Iterable[T] | Callable[[], Iterable[T]],
         name_of: Callable[[T], str],
         check: Callable[[T], None] = lambda _cls: None,
     ) -> None:
         self.concept, self.group = concept, group
         self._name_of, self._check = name_of, check
-        self._kinds: dict[str, T] = {}
+        self._builtins = builtins if callable(builtins) else lambda: list(builtins)
+        self._found: dict[str, T] | None = None
         self._plugins_loaded = False
         #: kind -> the import path it was registered from (the user's own config named it)
         self.imported: dict[str, str] = {}
-        for cls in builtins:
-            self.register(cls)
+
+    @property
+    def _kinds(self) -> dict[str, T]:
+        """name -> class, the built-in kinds registered first, on first use."""
+        if self._found is None:
+            self._found = {}
+            for cls in self._builtins():
+                self.register(cls)
+        return self._found
 
     def register(self, cls: T, name: str | None = None) -> T:
         """Add ``cls`` under its declared kind (and ``name`` too, if given); returns it.
 
         Registering another class under a kind already taken is refused: a kind names one class.
         """
+        kinds = self._kinds
         self._check(cls)
         for n in dict.fromkeys([self._name_of(cls), *([name] if name else [])]):
-            if self._kinds.get(n, cls) is not cls:
+            if kinds.get(n, cls) is not cls:
                 raise ValueError(
-                    f"{self.concept} kind {n!r} is already {self._describe(self._kinds[n])}; "
+                    f"{self.concept} kind {n!r} is already {self._describe(kinds[n])}; "
                     f"cannot also be {self._describe(cls)}"
                 )
-            self._kinds[n] = cls
+            kinds[n] = cls
         return cls
 
     @staticmethod

@@ -62,15 +62,15 @@ def track(
     """
     from tltrack.config.truth_file import file_truth
     from tltrack.engine import results
-    from tltrack.engine.scan_file import ScanFileError, read_scans
-    from tltrack.engine.setup import Setup
-    from tltrack.engine.track import (
+    from tltrack.engine.scan_file import (
+        ScanFileError,
         ScansDoNotFitError,
         check_fit,
-        write_estimates,
-        write_transfers,
+        read_scans,
     )
+    from tltrack.engine.setup import Setup
     from tltrack.engine.track import track as run_track
+    from tltrack.engine.track import write_estimates, write_transfers
 
     cfg = build_config(
         config,

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from tltrack.config import LinkSpec
 from tltrack.config.timeline import US, Timeline
+from tltrack.engine.names import reported_name
 from tltrack.engine.registry import FilterSpec, Role, build, parse, recovery, source_name
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.engine.streams import stream
@@ -186,19 +187,6 @@ class Lossy:
 
 
 # ---- the two halves ---------------------------------------------------------------------------
-
-
-def reported_name(spec: FilterSpec, source_id: str, n_sources: int) -> str:
-    """``source-pf`` for the paper's single source; ``source-pf/<id>`` when there are several."""
-    return spec.name if n_sources == 1 else f"{spec.name}/{source_id}"
-
-
-def operator_of(name: str, source_ids: Sequence[str]) -> str:
-    """Whose filter a reported name is (:func:`reported_name`'s inverse): a source's id, or the
-    primary's."""
-    if not name.startswith("source-"):
-        return PRIMARY
-    return name.split("/", 1)[1] if "/" in name else source_ids[0]
 
 
 class Sources:

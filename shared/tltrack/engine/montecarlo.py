@@ -32,11 +32,11 @@ from tltrack.engine.driver import (
     Driver,
     Lossy,
     StepRecord,
-    operator_of,
     primary_specs,
     source_links,
 )
 from tltrack.engine.faults import transfer_lag
+from tltrack.engine.names import operator_of
 from tltrack.engine.registry import FilterSpec, parse
 from tltrack.engine.scenario import Run, simulate
 from tltrack.engine.setup import Setup

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import PRIMARY
-from tltrack.engine.driver import operator_of
+from tltrack.engine.names import operator_of
 
 _STYLE = {
     "pf": "tab:blue",

@@ -35,6 +35,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,12 +44,19 @@ from tltrack.models import components
 from tltrack.models.base import MeasurementModel
 from tltrack.models.scan import MAX_DETECTIONS
 
+if TYPE_CHECKING:
+    from tltrack.engine.setup import Setup
+
 Array = NDArray[np.float64]
 TRUE, FALSE = {"1", "true", "True", "TRUE"}, {"0", "false", "False", "FALSE"}
 
 
 class ScanFileError(ValueError):
     """The file does not follow the schema; the message says where."""
+
+
+class ScansDoNotFitError(ValueError):
+    """The file's scans contradict the config's detection process."""
 
 
 @dataclass(frozen=True)
@@ -172,3 +180,30 @@ def _label(path: Path, line: int, text: str | None) -> bool | None:
     if text == "":
         return None
     raise ScanFileError(f"{path}:{line}: is_clutter must be 1, 0, true, false or empty")
+
+
+def check_fit(setup: Setup, scans: ScanFile) -> None:
+    """A sensor the config says detects every step with no false alarm (pd 1, no clutter) takes
+    exactly one detection per step: refuse a file that has none or several, naming the step.
+    A scan file's steps are the paper's, on one clock: refuse a config whose operators keep
+    their own (:mod:`tltrack.config.timeline`)."""
+    if not setup.timeline.synchronous:
+        raise ScansDoNotFitError(
+            f"{scans.path}: a scan file's step k is every sensor's, on one clock; the config "
+            "gives an operator its own period_s, phase_s or clock_offset_s (the engine runs "
+            "those: tltrack experiment)"
+        )
+    for sid in scans.detections:
+        if not setup.sensors[sid].detection.trivial:
+            continue
+        counts = scans.counts(sid)
+        wrong = np.flatnonzero((counts != 1) & (counts != -1))
+        if len(wrong):
+            k = int(wrong[0]) + 1
+            lines = ", ".join(map(str, scans.lines.get((sid, k), []))) or "none"
+            raise ScansDoNotFitError(
+                f"{scans.path}: step {k} of sensor {sid!r} has {counts[k - 1]} detections (lines: "
+                f"{lines}), but the config gives {sid!r} pd 1 and no false alarms: give its "
+                "detection process (primary_detection or sources[].detection; --pd, "
+                "--clutter-rate, --source-pd, --source-clutter-rate)"
+            )

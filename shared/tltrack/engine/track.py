@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from tltrack.config import Config
 from tltrack.engine.driver import Collector, Driver, StepRecord
 from tltrack.engine.montecarlo import FilterResult, Scores, own_n_z
-from tltrack.engine.scan_file import ScanFile
+from tltrack.engine.scan_file import ScanFile, check_fit
 from tltrack.engine.setup import Setup
 from tltrack.models.kinds import MOTIONS
 from tltrack.models.scan import Statement
@@ -35,10 +35,6 @@ Array = NDArray[np.float64]
 Estimated = tuple[int, str, Array, Array]
 #: one transfer: (k_apply, the source filter's name, source id, eta_hat, P_eta_eta)
 Sent = tuple[int, str, str, Array, Array]
-
-
-class ScansDoNotFitError(ValueError):
-    """The file's scans contradict the config's detection process."""
 
 
 @dataclass
@@ -62,33 +58,6 @@ class TrackResult:
     tracks: Tracks
     scores: dict[str, FilterResult] | None  #: against the truth, when there is one
     refused: list[str]  #: the scans refused (too large), with the line of each
-
-
-def check_fit(setup: Setup, scans: ScanFile) -> None:
-    """A sensor the config says detects every step with no false alarm (pd 1, no clutter) takes
-    exactly one detection per step: refuse a file that has none or several, naming the step.
-    A scan file's steps are the paper's, on one clock: refuse a config whose operators keep
-    their own (:mod:`tltrack.config.timeline`)."""
-    if not setup.timeline.synchronous:
-        raise ScansDoNotFitError(
-            f"{scans.path}: a scan file's step k is every sensor's, on one clock; the config "
-            "gives an operator its own period_s, phase_s or clock_offset_s (the engine runs "
-            "those: tltrack experiment)"
-        )
-    for sid in scans.detections:
-        if not setup.sensors[sid].detection.trivial:
-            continue
-        counts = scans.counts(sid)
-        wrong = np.flatnonzero((counts != 1) & (counts != -1))
-        if len(wrong):
-            k = int(wrong[0]) + 1
-            lines = ", ".join(map(str, scans.lines.get((sid, k), []))) or "none"
-            raise ScansDoNotFitError(
-                f"{scans.path}: step {k} of sensor {sid!r} has {counts[k - 1]} detections (lines: "
-                f"{lines}), but the config gives {sid!r} pd 1 and no false alarms: give its "
-                "detection process (primary_detection or sources[].detection; --pd, "
-                "--clutter-rate, --source-pd, --source-clutter-rate)"
-            )
 
 
 def statements(setup: Setup, scans: ScanFile, k: int) -> dict[str, Statement | None]:

@@ -13,13 +13,6 @@ from __future__ import annotations
 from typing import Any
 
 from tltrack.declare import Registry
-from tltrack.filters.auxiliary import AuxiliaryParticleFilter
-from tltrack.filters.particle import ParticleFilter
-from tltrack.filters.sigma_point import (
-    CubatureKalmanFilter3,
-    CubatureKalmanFilter5,
-    UnscentedKalmanFilter,
-)
 
 
 def _check(cls: Any) -> None:
@@ -30,17 +23,31 @@ def _check(cls: Any) -> None:
         raise ValueError(f"filter kind {cls.kind!r} must not start with a role's prefix")
 
 
-#: filter kind -> its class
-FILTERS: Registry[Any] = Registry(
-    "filter",
-    "tltrack.filters",
-    [
+def _builtins() -> list[Any]:
+    """The package's filter kinds, imported when a kind is first asked for: the config names
+    filters, so every service imports this registry, and most of them never filter."""
+    from tltrack.filters.auxiliary import AuxiliaryParticleFilter
+    from tltrack.filters.particle import ParticleFilter
+    from tltrack.filters.sigma_point import (
+        CubatureKalmanFilter3,
+        CubatureKalmanFilter5,
+        UnscentedKalmanFilter,
+    )
+
+    return [
         ParticleFilter,
         AuxiliaryParticleFilter,
         UnscentedKalmanFilter,
         CubatureKalmanFilter3,
         CubatureKalmanFilter5,
-    ],
+    ]
+
+
+#: filter kind -> its class
+FILTERS: Registry[Any] = Registry(
+    "filter",
+    "tltrack.filters",
+    _builtins,
     name_of=lambda cls: cls.kind,
     check=_check,
 )

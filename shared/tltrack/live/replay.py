@@ -27,9 +27,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from tltrack.engine.scan_file import ScanFileError, read_scans
+from tltrack.engine.scan_file import ScanFileError, check_fit, read_scans
 from tltrack.engine.setup import Setup
-from tltrack.engine.track import check_fit
 
 
 class ReplayError(ValueError):
