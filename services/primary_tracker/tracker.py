@@ -26,9 +26,9 @@ from tltrack.config.timeline import US
 from tltrack.filters.decision import NotComparableError
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
+from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.heartbeat import LinkWatch
 from tltrack.live.service import Service, load_settings, setup_logging
-from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.tracking import PrimaryEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule, Transfer

@@ -24,8 +24,8 @@ from tltrack.config.timeline import Timeline
 from tltrack.engine.scenario import reports, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
-from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.live.episodes import Episodes
+from tltrack.live.service import Service, load_settings, setup_logging
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Tick
 from tltrack.wire.transport import Received, ZenohSettings, decode_received

@@ -16,9 +16,9 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 from tltrack.config import Config, FilterKindName
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
+from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.heartbeat import HeartbeatSender
 from tltrack.live.service import Service, load_settings, setup_logging
-from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.tracking import SourceEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule
