@@ -76,8 +76,9 @@ class StepQueue(Generic[T]):
 
 
 class Sensing(Protocol):
-    """What a tracker's episode tells of its own sensor (:class:`SourceEpisode`,
-    :class:`PrimaryEpisode`)."""
+    """What a tracker's episode tells of its own sensor
+    (:class:`~tltrack.live.tracking.SourceEpisode`,
+    :class:`~tltrack.live.tracking.PrimaryEpisode`)."""
 
     @property
     def n_z(self) -> int: ...
