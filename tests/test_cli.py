@@ -242,6 +242,14 @@ def test_plot_refuses_a_file_that_is_not_a_results_json(tmp_path, text, says):
         (b"a: 1\n", "c.yaml", "not valid JSON (a config is .toml, or else JSON)", "YAML"),
         (b'preset = "bogus"\n', "c.toml", "preset: Input should be", "Field required"),
         (b"[primary_detection]\npd = nan\n", "c.toml", "pd: Input should be a finite", "<= 1"),
+        (b"runs = true\n", "c.toml", "runs: Value error, a whole number, not True", "should be"),
+        (b'runs = "3"\n', "c.toml", "runs: Value error, a whole number, not '3'", "should be"),
+        (
+            b'recovery = "yes"\n',
+            "c.toml",
+            "recovery: Value error, true or false, not 'yes'",
+            "should be",
+        ),
     ],
 )
 def test_a_bad_config_file_is_named_with_its_one_problem(tmp_path, content, name, says, not_said):

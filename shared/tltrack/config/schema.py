@@ -19,6 +19,7 @@ from typing import Annotated, Any, Literal
 from pydantic import (
     AfterValidator,
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     FiniteFloat,
@@ -104,6 +105,25 @@ Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
 Longitude = Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)]
 Point = tuple[FiniteFloat, FiniteFloat]
+
+
+def _as_written(kind: type, what: str) -> Any:
+    """A check before pydantic's coercion, which would read ``runs = true`` as 1, ``"1"`` as 1
+    and ``recovery = "yes"`` as true: a value of the wrong type in a file is a mistake to name."""
+
+    def check(v: Any) -> Any:
+        ok = isinstance(v, bool) if kind is bool else not isinstance(v, bool | str)
+        if not ok:
+            raise ValueError(f"{what}, not {v!r}")
+        return v
+
+    return BeforeValidator(check)
+
+
+#: a whole number, not a boolean or a string (a float with no fraction passes, as pydantic's own)
+Count = Annotated[int, _as_written(int, "a whole number")]
+#: true or false, not a string or a number
+Flag = Annotated[bool, _as_written(bool, "true or false")]
 
 
 class SensorSpec(BaseModel):
@@ -334,7 +354,7 @@ class Config(BaseModel):
     Ts: float = Field(
         1.0, gt=0, allow_inf_nan=False, description="sampling period", json_schema_extra=unit("s")
     )
-    K: int = Field(
+    K: Count = Field(
         100,
         ge=1,
         le=100_000,
@@ -416,7 +436,7 @@ class Config(BaseModel):
         default_factory=lambda: [SourceSpec.model_validate({})], min_length=1
     )
     truth: TruthMode = "fixed"
-    truth_seed: int = Field(
+    truth_seed: Count = Field(
         0, ge=0, description="seed of the fixed truth", json_schema_extra=unit("1")
     )
     truth_file: Path | None = Field(
@@ -436,13 +456,13 @@ class Config(BaseModel):
         description="longest gap between a truth file's reports",
         json_schema_extra=unit("s"),
     )
-    seed: int = Field(
+    seed: Count = Field(
         0, ge=0, description="master seed of every random stream", json_schema_extra=unit("1")
     )
-    particles: int = Field(
+    particles: Count = Field(
         6000, ge=10, le=10_000_000, description="particles per PF", json_schema_extra=unit("1")
     )
-    runs: int = Field(
+    runs: Count = Field(
         100,
         ge=1,
         le=1_000_000,
@@ -473,7 +493,7 @@ class Config(BaseModel):
         description="UKF/CKF in clutter: probability the target's detection is in the PDA gate",
         json_schema_extra=unit("1"),
     )
-    recovery: bool = Field(False, description="reinitialise a particle filter that lost track")
+    recovery: Flag = Field(False, description="reinitialise a particle filter that lost track")
     rpf_bandwidth: float = Field(
         0.0,
         ge=0,
