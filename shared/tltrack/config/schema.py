@@ -107,23 +107,26 @@ Longitude = Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)]
 Point = tuple[FiniteFloat, FiniteFloat]
 
 
-def _as_written(kind: type, what: str) -> Any:
-    """A check before pydantic's coercion, which would read ``runs = true`` as 1, ``"1"`` as 1
-    and ``recovery = "yes"`` as true: a value of the wrong type in a file is a mistake to name."""
+# Checks before pydantic's coercion, which would read ``runs = true`` as 1, ``"1"`` as 1 and
+# ``recovery = "yes"`` as true: a value of the wrong type in a file is a mistake to name.
 
-    def check(v: Any) -> Any:
-        ok = isinstance(v, bool) if kind is bool else not isinstance(v, bool | str)
-        if not ok:
-            raise ValueError(f"{what}, not {v!r}")
-        return v
 
-    return BeforeValidator(check)
+def _whole_number(v: Any) -> Any:
+    if isinstance(v, bool | str):
+        raise ValueError(f"a whole number, not {v!r}")
+    return v
+
+
+def _true_or_false(v: Any) -> Any:
+    if not isinstance(v, bool):
+        raise ValueError(f"true or false, not {v!r}")
+    return v
 
 
 #: a whole number, not a boolean or a string (a float with no fraction passes, as pydantic's own)
-Count = Annotated[int, _as_written(int, "a whole number")]
+Count = Annotated[int, BeforeValidator(_whole_number)]
 #: true or false, not a string or a number
-Flag = Annotated[bool, _as_written(bool, "true or false")]
+Flag = Annotated[bool, BeforeValidator(_true_or_false)]
 
 
 class SensorSpec(BaseModel):
