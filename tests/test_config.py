@@ -46,3 +46,9 @@ def test_loads_toml_and_json_with_overrides(tmp_path):
         load_config(bad)
     with pytest.raises(ConfigError, match=r"sources\.0\.intensity"):
         make_config().with_source_intensity(0.0)
+
+
+def test_recovery_takes_numpy_booleans_as_the_code_passes_them() -> None:
+    import numpy as np
+
+    assert make_config(recovery=np.bool_(True)).recovery is True

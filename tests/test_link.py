@@ -121,14 +121,18 @@ def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
         ({"loss": 0.1}, "loss"),
         ({"cut": 1}, "cut"),
         ([], "object"),
-        ({"delay_ms": nan}, "delay_ms must be finite and >= 0"),
-        ({"jitter_ms": -1}, "jitter_ms must be finite and >= 0"),
-        ({"delay_ms": inf}, "delay_ms must be finite"),
+        ({"delay_ms": nan}, r"delay_ms must be in \[0, 3600000\]"),
+        ({"jitter_ms": -1}, r"jitter_ms must be in \[0, 3600000\]"),
+        ({"delay_ms": inf}, "delay_ms must be in"),
         ({"rate_kbps": 0}, "rate_kbps must be finite and > 0"),
+        ({"delay_ms": 1e300}, r"delay_ms must be in \[0, 3600000\]"),  # finite, and forever
     ):
         path.write_text(json.dumps(bad))
         with pytest.raises(ValueError, match=named):
             read_control(path)
+    path.write_text('{"jitter_ms": ' + "9" * 400 + "}")  # overflows a float: still a ValueError
+    with pytest.raises(ValueError, match="jitter_ms must be in"):
+        read_control(path)
 
 
 @pytest.mark.parametrize(

@@ -210,3 +210,21 @@ def test_an_episodes_estimates_as_tltrack_tracks_csv(tmp_path: Path) -> None:
     write_estimates(want, "ct", rows)
     assert out.read_text() == want.read_text()
     assert scores("--db", str(db)).exit_code == 2  # nothing asked for
+
+
+def test_jsonl_to_a_device_is_written_through(tmp_path: Path) -> None:
+    """Not replaced by a file of its own: /dev/stdout, a FIFO, a shell's >(gzip ...)."""
+    import os
+    import threading
+
+    db = tmp_path / "scorer.sqlite"
+    scorer_file(db).close()
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    got: list[str] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()))
+    reader.start()
+    r = scores("--jsonl", str(fifo), "--db", str(db))
+    reader.join(10)
+    assert r.exit_code == 0, r.output
+    assert fifo.is_fifo() and len(got[0].splitlines()) == 8, got

@@ -25,6 +25,7 @@ from __future__ import annotations
 import importlib
 import math
 import re
+import threading
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib.metadata import entry_points
@@ -108,17 +109,24 @@ class Registry(Generic[T]):
         self._name_of, self._check = name_of, check
         self._builtins = builtins if callable(builtins) else lambda: list(builtins)
         self._found: dict[str, T] | None = None
+        self._loading = threading.RLock()  # threads that ask at once wait for one import
         self._plugins_loaded = False
         #: kind -> the import path it was registered from (the user's own config named it)
         self.imported: dict[str, str] = {}
 
     @property
     def _kinds(self) -> dict[str, T]:
-        """name -> class, the built-in kinds registered first, on first use."""
+        """name -> class, the built-in kinds registered first, on first use (kept only once all
+        imported: a failed import is raised again on the next use, not taken for no kinds)."""
         if self._found is None:
-            self._found = {}
-            for cls in self._builtins():
-                self.register(cls)
+            with self._loading:
+                if self._found is None:
+                    found: dict[str, T] = {}
+                    for cls in self._builtins():
+                        self._check(cls)
+                        if found.setdefault(self._name_of(cls), cls) is not cls:
+                            raise ValueError(f"two built-in {self.concept} kinds are named alike")
+                    self._found = found
         return self._found
 
     def register(self, cls: T, name: str | None = None) -> T:

@@ -36,21 +36,26 @@ console = Console(stderr=True)
 
 #: how often a long job writes its progress when stderr is not a terminal [s]
 LOG_EVERY_S = 60.0
+#: runs counted this soon after a task starts were read back from a checkpoint, not run [s]
+READ_BACK_S = 1.0
 
 
 class LoggedProgress(Progress):
-    """Rich's bar on a terminal; in a log file, a line every :data:`LOG_EVERY_S` seconds.
+    """Rich's bar on a terminal; in a log file, a line per task every :data:`LOG_EVERY_S` seconds.
 
     Rich redraws a bar only on a terminal, so a run of hours sent to a file (``nohup``,
     ``scripts/long_runs.sh``, CI) would say nothing until its end. Its lines give the count, the
     time so far and the time left at the mean rate so far (a batch's runs finish together, so a
-    recent rate would jump).
+    recent rate would jump). Runs counted within :data:`READ_BACK_S` of a task's start were read
+    back from a checkpoint, not run: they are left out of the rate.
     """
 
     def __init__(self, what: str, *columns: Any, **kwargs: Any) -> None:
         super().__init__(*columns, **kwargs)
         self.what = what
-        self._logged_at = time.monotonic()
+        #: per task: when its last line was written, and the (count, time) its rate starts from
+        self._logged_at: dict[TaskID, float] = {}
+        self._base: dict[TaskID, tuple[float, float]] = {}
 
     def advance(self, task_id: TaskID, advance: float = 1) -> None:
         super().advance(task_id, advance)
@@ -65,17 +70,23 @@ class LoggedProgress(Progress):
             return
         now = time.monotonic()
         task = self._tasks[task_id]
-        if now - self._logged_at < LOG_EVERY_S or task.finished or not task.completed:
+        started = task.start_time if task.start_time is not None else now
+        if now - started < READ_BACK_S:  # read back from a checkpoint: not in the rate
+            self._base[task_id] = (task.completed, now)
+        self._base.setdefault(task_id, (0, started))
+        self._logged_at.setdefault(task_id, started)
+        if now - self._logged_at[task_id] < LOG_EVERY_S or task.finished:
             return
-        self._logged_at = now
-        elapsed = task.elapsed or 0.0
-        line = f"{self.what}: {task.completed:g}"
+        self._logged_at[task_id] = now
+        name = task.description or self.what
+        line = f"{name}: {task.completed:.0f}"
         if task.total:
-            left = elapsed * (task.total - task.completed) / task.completed
-            line += f"/{task.total:g} ({task.completed / task.total:.0%})"
-        line += f" after {timedelta(seconds=round(elapsed))}"
-        if task.total:
-            line += f", about {timedelta(seconds=round(left))} left"
+            line += f"/{task.total:.0f} ({task.completed / task.total:.0%})"
+        line += f" after {timedelta(seconds=round(now - started))}"
+        done, since = self._base[task_id]
+        if task.total and task.completed > done:
+            rate = (task.completed - done) / (now - since)
+            line += f", about {timedelta(seconds=round((task.total - task.completed) / rate))} left"
         self.console.print(line, markup=False, highlight=False)
 
 

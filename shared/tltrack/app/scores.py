@@ -106,10 +106,15 @@ def _write_jsonl(conn: sqlite3.Connection, db: Path, episode: str | None, jsonl:
 
 @contextlib.contextmanager
 def _output(path: Path) -> Iterator[TextIO]:
-    """``path`` opened for writing, or stdout for ``-``. The file appears whole or not at all: a
-    row that cannot be read leaves no half-written file (nor clobbers an older one)."""
+    """``path`` opened for writing, or stdout for ``-``. A regular file appears whole or not at
+    all: a row that cannot be read leaves no half-written file (nor clobbers an older one). A
+    device, a pipe or a link (``/dev/stdout``, ``>(gzip ...)``) is written through as it is."""
     if str(path) == "-":
         yield sys.stdout
+        return
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        with path.open("w") as f:
+            yield f
         return
     path.parent.mkdir(parents=True, exist_ok=True)
     part = path.with_name(f".{path.name}.part")

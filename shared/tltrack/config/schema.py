@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+import numpy as np
 from pydantic import (
     AfterValidator,
     BaseModel,
@@ -118,9 +119,9 @@ def _whole_number(v: Any) -> Any:
 
 
 def _true_or_false(v: Any) -> Any:
-    if not isinstance(v, bool):
+    if not isinstance(v, bool | np.bool_):
         raise ValueError(f"true or false, not {v!r}")
-    return v
+    return bool(v)
 
 
 #: a whole number, not a boolean or a string (a float with no fraction passes, as pydantic's own)

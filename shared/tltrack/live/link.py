@@ -247,6 +247,9 @@ def _put(conn: _Connection, held: queue.Queue[Any], item: Any) -> bool:
 
 # ---- control from the command line ---------------------------------------------------------
 
+#: the longest delay or jitter a control file may set [ms]: an hour (more stalls the link for good)
+MOST_DELAY_MS = 3_600_000.0
+
 
 def read_control(path: Path) -> dict[str, Any]:
     """A control file's settings: a JSON object with any of ``delay_ms``, ``jitter_ms``,
@@ -270,8 +273,13 @@ def read_control(path: Path) -> dict[str, Any]:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ValueError(f"{path}: {name} must be a number")
         rate = name == "rate_kbps"  # a cap of 0 would stall the link for good
-        if not (math.isfinite(value) and (value > 0 if rate else value >= 0)):
-            raise ValueError(f"{path}: {name} must be finite and {'> 0' if rate else '>= 0'}")
+        try:
+            ok = math.isfinite(value) and (value > 0 if rate else 0 <= value <= MOST_DELAY_MS)
+        except OverflowError:  # an integer of hundreds of digits
+            ok = False
+        if not ok:
+            want = "finite and > 0" if rate else f"in [0, {MOST_DELAY_MS:.0f}]"
+            raise ValueError(f"{path}: {name} must be {want}")
     return raw
 
 

@@ -5,7 +5,7 @@ a UKF's eigen-decomposition fails and stops the service that ran it, a particle 
 turn NaN, and so does every estimate after. No sensor of this domain measures anything near
 :data:`MAX_MAGNITUDE`, so a value beyond it, or a range that is not positive, or a bearing outside
 [-pi, pi], is refused where it enters: a recorded scan's row (:mod:`tltrack.engine.scan_file`), a
-live measurement (:mod:`tltrack.live.tracking`), a source's transfer
+live measurement (:mod:`tltrack.live.episodes`), a source's transfer
 (:mod:`tltrack.wire.messages`) and a recorded truth's row (:mod:`tltrack.config.truth_file`).
 """
 
