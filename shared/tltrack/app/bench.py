@@ -69,7 +69,6 @@ def bench_live(
     text = json.dumps(result, indent=1)
     console.print(text)
     if json_out:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(text)
 
 
@@ -104,6 +103,5 @@ def bench(
         result = run_bench(particles=particles, repeats=repeats)
         console.print(format_table(result))
     if json_out:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(result, indent=1))
         console.print(f"wrote {json_out}")

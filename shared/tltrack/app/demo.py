@@ -89,7 +89,6 @@ def demo(
         console.print(f"stopped by {stop}; the router and every service are stopped")
         raise typer.Exit(128 + stop.signum) from None
     if json_out:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1))
         console.print(f"wrote {json_out}")
 
