@@ -12,6 +12,7 @@ from tltrack.config.load import load_config
 from tltrack.engine import montecarlo
 from tltrack.engine.checkpoint import Checkpoint, code_digest
 from tltrack.engine.montecarlo import run_sweep
+from tltrack.studies.common import Runner
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
@@ -195,3 +196,39 @@ def test_a_save_that_fails_warns_and_the_sweep_goes_on(tmp_path, monkeypatch):
     with pytest.warns(UserWarning, match="cannot save"):
         _same(_sweep(cfgs, tmp_path), whole)
     assert not list(tmp_path.glob("*.pkl"))  # nor a temporary file left behind
+
+
+def _study_sweep(folder, batch_size=3, progress=None):
+    runner = Runner(workers=1, batch_size=batch_size, checkpoint=folder, progress=progress)
+    return runner.sweep(_cfgs(runs=4), NAMES, time_steps=False)
+
+
+def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batches_run):
+    whole = _sweep(_cfgs(runs=4))
+    _same(_study_sweep(tmp_path), whole)
+    (kept,) = tmp_path.glob("sweep-*.json")
+    for batch in tmp_path.glob("batch-*.pkl"):  # what a copy of the sweep files alone carries
+        batch.unlink()
+    batches_run.clear()
+    heard: list[int] = []
+    _same(_study_sweep(tmp_path, progress=heard.append), whole)
+    assert batches_run == []
+    assert heard == [4]  # the bar counts the sweep's runs
+    _study_sweep(tmp_path, batch_size=2)  # another batch size: another file, run again
+    assert len(batches_run) == 2 and len(list(tmp_path.glob("sweep-*.json"))) == 2
+    assert kept.exists()
+
+
+def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run):
+    whole = _study_sweep(tmp_path)
+    (kept,) = tmp_path.glob("sweep-*.json")
+    for batch in tmp_path.glob("batch-*.pkl"):
+        batch.unlink()
+    doc = json.loads(kept.read_text())
+    doc["results"][0]["pf"]["run_rmse"].pop()  # a run short
+    kept.write_text(json.dumps(doc))
+    batches_run.clear()
+    with pytest.warns(UserWarning, match="running its sweep again"):
+        _same(_study_sweep(tmp_path), whole)
+    assert batches_run == [[0, 1, 2], [3]]
+    assert len(json.loads(kept.read_text())["results"][0]["pf"]["run_rmse"]) == 4  # rewritten

@@ -20,9 +20,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config, load_config
-from tltrack.engine.montecarlo import FilterResult, run_sweep
+from tltrack.engine.montecarlo import FilterResult, default_batch_size, run_sweep
 from tltrack.engine.scenario import truth
 from tltrack.engine.setup import PRIMARY, Setup
+from tltrack.studies import finished
 
 Results = dict[str, FilterResult]
 
@@ -35,7 +36,8 @@ class Runner:
     workers: int | None = None
     batch_size: int | None = None
     executor: Executor | None = None  #: a Dask cluster's (tltrack.engine.cluster), or local
-    #: where finished batches are kept, so that a stopped study resumes (tltrack.engine.checkpoint)
+    #: where finished batches are kept, so that a stopped study resumes (tltrack.engine.checkpoint),
+    #: and finished sweeps (tltrack.studies.finished)
     checkpoint: Path | None = None
 
     def run(self, cfg: Config, names: Sequence[str]) -> Results:
@@ -45,17 +47,29 @@ class Runner:
         self, cfgs: Sequence[Config], names: Sequence[str], *, time_steps: bool = True
     ) -> list[Results]:
         """Configurations differing only in the primary's sensor, the sources run once; with
-        ``time_steps``, one more run timed step by step (:func:`run_sweep`)."""
-        return run_sweep(
+        ``time_steps``, one more run timed step by step (:func:`run_sweep`). A sweep that
+        finished before in the checkpoint folder is read back whole."""
+        batch_size = self.batch_size or default_batch_size(cfgs[0], names)
+        kept = None
+        if self.checkpoint is not None:
+            kept = finished.path(self.checkpoint, cfgs, names, batch_size, time_steps)
+            if (results := finished.load(kept, cfgs)) is not None:
+                if self.progress:
+                    self.progress(cfgs[0].runs)
+                return results
+        results = run_sweep(
             cfgs,
             names,
             progress=self.progress,
             workers=self.workers,
-            batch_size=self.batch_size,
+            batch_size=batch_size,
             executor=self.executor,
             time_steps=time_steps,
             checkpoint=self.checkpoint,
         )
+        if kept is not None:
+            finished.save(kept, results)
+        return results
 
 
 def run_difference(a: FilterResult, b: FilterResult) -> NDArray[np.float64]:
