@@ -225,6 +225,31 @@ def test_progress_in_a_log_file_is_a_line_a_minute(monkeypatch):
     assert len(lines) == 2, lines
 
 
+def test_a_task_that_waits_for_others_is_timed_from_its_own_start(monkeypatch):
+    """reproduce's jobs run one sweep after another: a job's time left comes from its own runs,
+    not from the hours it waited (it starts at its sweep's first, empty advance)."""
+    import io
+
+    from rich.console import Console
+    from tltrack.app import common
+
+    log = io.StringIO()
+    monkeypatch.setattr(common, "LOG_EVERY_S", 0.0)
+    clock = [0.0]
+    console = Console(file=log, force_terminal=False, width=200)
+    with common.LoggedProgress("jobs", console=console, get_time=lambda: clock[0]) as bar:
+        first = bar.add_task("first", total=10, start=False)
+        later = bar.add_task("later", total=10, start=False)
+        bar.advance(first, 0)
+        clock[0] = 3600.0
+        bar.advance(first, 10)  # an hour for the first job
+        bar.advance(later, 0)  # the later job's sweep starts
+        clock[0] = 3610.0
+        bar.advance(later, 5)
+    lines = [s for s in log.getvalue().splitlines() if s.startswith("later: ")]
+    assert lines[-1] == "later: 5/10 (50%) after 0:00:10, about 0:00:10 left", lines
+
+
 @pytest.mark.parametrize(
     ("text", "says"),
     [

@@ -3,7 +3,6 @@ and the configuration built from a file and the options."""
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
@@ -47,7 +46,9 @@ class LoggedProgress(Progress):
     ``scripts/long_runs.sh``, CI) would say nothing until its end. Its lines give the count, the
     time so far and the time left at the mean rate so far (a batch's runs finish together, so a
     recent rate would jump). Runs counted within :data:`READ_BACK_S` of a task's start were read
-    back from a checkpoint, not run: they are left out of the rate.
+    back from a checkpoint, not run: they are left out of the rate. A task added with
+    ``start=False`` (one that waits for others) starts at its first advance, of 0 runs or more:
+    its wait is not in its rate either.
     """
 
     def __init__(self, what: str, *columns: Any, **kwargs: Any) -> None:
@@ -58,6 +59,8 @@ class LoggedProgress(Progress):
         self._base: dict[TaskID, tuple[float, float]] = {}
 
     def advance(self, task_id: TaskID, advance: float = 1) -> None:
+        if self._tasks[task_id].start_time is None:
+            self.start_task(task_id)
         super().advance(task_id, advance)
         self._log(task_id)
 
@@ -68,7 +71,7 @@ class LoggedProgress(Progress):
     def _log(self, task_id: TaskID) -> None:
         if self.disable or self.console.is_terminal:
             return
-        now = time.monotonic()
+        now = self.get_time()  # the clock of the tasks' start times
         task = self._tasks[task_id]
         started = task.start_time if task.start_time is not None else now
         if now - started < READ_BACK_S:  # read back from a checkpoint: not in the rate

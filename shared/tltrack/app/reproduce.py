@@ -63,7 +63,9 @@ def reproduce(
     checkpoint = checked_checkpoint(checkpoint)
     checked_folder(out)
     with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
-        tasks = {j.label: bar.add_task(j.label, total=runs) for j in todo}
+        # a job's clock starts when its sweep does (run_all's first, empty advance), not while
+        # it waits for the sweeps before it
+        tasks = {j.label: bar.add_task(j.label, total=runs, start=False) for j in todo}
         docs = rep.run_all(
             todo,
             out,

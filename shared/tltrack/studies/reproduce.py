@@ -151,9 +151,10 @@ def run_all(
     executor: Executor | None = None,
     checkpoint: Path | None = None,
 ) -> dict[str, dict[str, Any]]:
-    """Run every job (``progress(label, runs_done)``), saving each one's results.json; the
-    batches go to ``executor`` (a Dask cluster's) when given, else to a local pool, and are kept
-    in ``checkpoint`` when given (:mod:`tltrack.engine.checkpoint`).
+    """Run every job (``progress(label, runs_done)``, with 0 runs when its sweep starts),
+    saving each one's results.json; the batches go to ``executor`` (a Dask cluster's) when given,
+    else to a local pool, and are kept in ``checkpoint`` when given
+    (:mod:`tltrack.engine.checkpoint`).
 
     A job's ``wall_s`` is that of its sweep (``sweep`` lists the jobs that shared it).
     """
@@ -170,6 +171,7 @@ def run_all(
                 if progress:
                     progress(label, n)
 
+        advance(0)  # the jobs' sweep starts: their progress, waiting until now, starts too
         swept = run_sweep(
             cfgs,
             names,
