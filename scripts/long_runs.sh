@@ -89,8 +89,9 @@ for s in robust sources budget; do
 done
 
 # ---- papers/manoeuvres: one model against the target class's modes on every truth
-# Both keep their batches in one checkpoint folder (git ignores it): stopped, the same command
-# resumes, and the 1000 runs (about 3.2 h on 2 cores, at the 200's rate) reuse the 200's.
+# Both keep their batches in one checkpoint folder: stopped, the same command resumes, and the
+# 1000 runs reuse the 200's. Git ignores the batches but not the finished sweeps (sweep-*.json):
+# committed, they carry the 1000 runs (about 5 h on 2 cores) across sessions.
 run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES" \
     --checkpoint "$MANOEUVRES/checkpoint"
 run "$MANOEUVRES" manoeuvres-1000 study manoeuvres --runs 1000 --out "$MANOEUVRES/n1000" \
