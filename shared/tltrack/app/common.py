@@ -129,7 +129,8 @@ CheckpointDir = Annotated[
     typer.Option(
         "--checkpoint",
         help="keep each finished batch in this folder; the same command run again after a stop "
-        "resumes from it (only a folder you wrote: its files are pickles)",
+        "resumes from it (only a folder you wrote: its files are pickles). A study also keeps "
+        "each finished sweep there as sweep-*.json, which can be copied elsewhere alone",
     ),
 ]
 
