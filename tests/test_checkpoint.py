@@ -219,6 +219,24 @@ def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batch
     assert kept.exists()
 
 
+def test_a_sweep_finished_on_another_machine_is_read_back_with_a_warning(tmp_path, batches_run):
+    whole = _study_sweep(tmp_path)
+    (kept,) = tmp_path.glob("sweep-*.json")
+    for batch in tmp_path.glob("batch-*.pkl"):
+        batch.unlink()
+    doc = json.loads(kept.read_text())
+    doc["made"]["environment"]["cpu"] = "another-cpu"  # its name differs as its digest does
+    kept.unlink()
+    (tmp_path / "sweep-000000000000000000000000-b3.json").write_text(json.dumps(doc))
+    batches_run.clear()
+    with pytest.warns(UserWarning, match=r"another environment \(cpu differ; CPU another-cpu"):
+        _same(_study_sweep(tmp_path), whole)
+    assert batches_run == []
+    batches_run.clear()
+    _study_sweep(tmp_path, batch_size=2)  # another sweep: not that file's, so run
+    assert len(batches_run) == 2
+
+
 def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run):
     whole = _study_sweep(tmp_path)
     (kept,) = tmp_path.glob("sweep-*.json")

@@ -52,8 +52,8 @@ class Runner:
         batch_size = self.batch_size or default_batch_size(cfgs[0], names)
         kept = None
         if self.checkpoint is not None:
-            kept = finished.path(self.checkpoint, cfgs, names, batch_size, time_steps)
-            if (results := finished.load(kept, cfgs)) is not None:
+            kept = finished.Finished(self.checkpoint, cfgs, names, batch_size, time_steps)
+            if (results := kept.load()) is not None:
                 if self.progress:
                     self.progress(cfgs[0].runs)
                 return results
@@ -68,7 +68,7 @@ class Runner:
             checkpoint=self.checkpoint,
         )
         if kept is not None:
-            finished.save(kept, results)
+            kept.save(results)
         return results
 
 
