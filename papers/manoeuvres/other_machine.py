@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,10 @@ from tltrack.studies.finished import Finished
 from tltrack.studies.manoeuvres import FILTERS, TRUTHS, configs
 
 HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
 CHECKPOINT = HERE / "results" / "checkpoint"
-TRACKS = HERE.parents[1] / "examples" / "tracks"
+#: as the study's --tracks names it, from the repository's root: a configuration holds the path
+TRACKS = Path("examples/tracks")
 #: the committed table's sweeps: 1000 runs, batches of 22, one run timed
 RUNS, BATCH, TIMED = 1000, 22, True
 
@@ -32,6 +35,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=4, help="runs compared per sweep")
     runs = parser.parse_args().runs
+    os.chdir(ROOT)
     made = {}
     for file in sorted(CHECKPOINT.glob("sweep-*.json")):
         doc = json.loads(file.read_text(encoding="utf-8"))
