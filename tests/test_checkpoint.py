@@ -203,12 +203,20 @@ def _study_sweep(folder, batch_size=3, progress=None):
     return runner.sweep(_cfgs(runs=4), NAMES, time_steps=False)
 
 
-def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batches_run):
-    whole = _sweep(_cfgs(runs=4))
-    _same(_study_sweep(tmp_path), whole)
-    (kept,) = tmp_path.glob("sweep-*.json")
-    for batch in tmp_path.glob("batch-*.pkl"):  # what a copy of the sweep files alone carries
+def _sweep_file_alone(folder):
+    """A study's sweep, run with ``folder`` as its checkpoint, and its sweep file, every batch
+    file deleted: what a copy of the sweep files alone carries."""
+    results = _study_sweep(folder)
+    (kept,) = folder.glob("sweep-*.json")
+    for batch in folder.glob("batch-*.pkl"):
         batch.unlink()
+    return results, kept
+
+
+def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batches_run):
+    studied, kept = _sweep_file_alone(tmp_path)
+    whole = _sweep(_cfgs(runs=4))
+    _same(studied, whole)
     batches_run.clear()
     heard: list[int] = []
     _same(_study_sweep(tmp_path, progress=heard.append), whole)
@@ -220,10 +228,7 @@ def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batch
 
 
 def test_a_sweep_finished_on_another_machine_is_read_back_with_a_warning(tmp_path, batches_run):
-    whole = _study_sweep(tmp_path)
-    (kept,) = tmp_path.glob("sweep-*.json")
-    for batch in tmp_path.glob("batch-*.pkl"):
-        batch.unlink()
+    whole, kept = _sweep_file_alone(tmp_path)
     doc = json.loads(kept.read_text())
     doc["made"]["environment"]["cpu"] = "another-cpu"  # its name differs as its digest does
     kept.unlink()
@@ -238,10 +243,7 @@ def test_a_sweep_finished_on_another_machine_is_read_back_with_a_warning(tmp_pat
 
 
 def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run):
-    whole = _study_sweep(tmp_path)
-    (kept,) = tmp_path.glob("sweep-*.json")
-    for batch in tmp_path.glob("batch-*.pkl"):
-        batch.unlink()
+    whole, kept = _sweep_file_alone(tmp_path)
     doc = json.loads(kept.read_text())
     doc["results"][0]["pf"]["run_rmse"].pop()  # a run short
     kept.write_text(json.dumps(doc))
