@@ -1,6 +1,7 @@
 """A sweep stopped part-way resumes from its checkpoint folder, to the uninterrupted numbers."""
 
 import dataclasses
+import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -10,9 +11,10 @@ from tltrack.app import app
 from tltrack.config import make_config
 from tltrack.config.load import load_config
 from tltrack.engine import montecarlo
-from tltrack.engine.checkpoint import Checkpoint, code_digest
+from tltrack.engine.checkpoint import Checkpoint, code_digest, environment, plugin_digest
 from tltrack.engine.montecarlo import run_sweep
 from tltrack.studies.common import Runner
+from tltrack.studies.finished import Finished
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
@@ -252,3 +254,28 @@ def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run)
         _same(_study_sweep(tmp_path), whole)
     assert batches_run == [[0, 1, 2], [3]]
     assert len(json.loads(kept.read_text())["results"][0]["pf"]["run_rmse"]) == 4  # rewritten
+
+
+def test_the_keys_are_the_digests_that_named_the_files_before_them(tmp_path):
+    """Batch and sweep files (papers/manoeuvres/results/checkpoint) were named by these digests
+    before :meth:`Checkpoint.key` computed them: they are found by it."""
+    cfgs, runs = _cfgs(runs=4), list(range(4))
+    what = {
+        "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
+        "truth_files": [None, None],
+        "filters": NAMES,
+        "code": code_digest(),
+        "plugins": plugin_digest(),
+        "environment": environment(),
+    }
+
+    def digest(text):
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+    kept = Checkpoint(tmp_path, cfgs, NAMES)
+    machine = digest(f"{json.dumps(what, sort_keys=True)}|{runs}")
+    assert kept.path(runs).name == f"batch-{machine}.pkl" and kept.key(runs) == machine
+    del what["environment"]
+    finished = Finished(tmp_path, cfgs, NAMES, 3, True)
+    assert finished.file.name == f"sweep-{machine}-b3-timed.json"
+    assert finished.key == digest(f"{json.dumps(what, sort_keys=True)}|{runs}|-b3-timed")

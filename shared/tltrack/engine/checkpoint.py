@@ -20,11 +20,19 @@ A batch's file is named by a digest of all that determines its statistics on thi
   ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, ``NPY_DISABLE_CPU_FEATURES``, ``OPENBLAS_CORETYPE``.
 
 Any other change names other files: a stale batch is never read, it is run again. Files are
-written whole or not at all (a temporary file, synced, then renamed), so a process killed
-mid-write leaves nothing half-read; a file that cannot be read is run again, with a warning. A
-folder that cannot be written is refused before any batch runs; a save that fails later (a full
-disk) warns once and the sweep goes on without its checkpoint. The files are pickles: resume only
-from a folder that you wrote.
+written whole or not at all (:func:`~tltrack.engine.checkpoint.write_whole`: a temporary file,
+synced, then renamed), so a process killed mid-write leaves nothing half-read; a file that cannot
+be read is run again, with a warning. A folder that cannot be written is refused before any batch
+runs; a save that fails later (a full disk) warns once and the sweep goes on without its
+checkpoint.
+
+The files it writes in the folder:
+
+- ``batch-<key>.pkl``, one per finished batch, ``key`` the digest of its runs
+  (:meth:`~tltrack.engine.checkpoint.Checkpoint.key`). They are pickles: resume only from a folder
+  that you wrote.
+
+:mod:`tltrack.studies.finished` keeps a whole finished sweep in the same folder, named alike.
 """
 
 from __future__ import annotations
@@ -40,9 +48,9 @@ import pickle
 import platform
 import tempfile
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from tltrack.config import Config
 
@@ -136,6 +144,62 @@ def _truth_digest(cfg: Config) -> str | None:
     return hashlib.sha256(Path(cfg.truth_file).read_bytes()).hexdigest() if cfg.truth_file else None
 
 
+def write_whole(path: Path, write: Callable[[IO[Any]], object], *, binary: bool) -> None:
+    """Write ``path`` whole or not at all: ``write`` fills a temporary file in the same folder
+    (mode 644, binary or UTF-8 text), which is flushed, synced and renamed over ``path``. On any
+    error the temporary file is removed and the error raised: ``path`` is the old file or the new
+    one, never half of it."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    try:
+        with os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8") as f:
+            os.fchmod(f.fileno(), 0o644)
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _differences(theirs: Any) -> str:
+    """How the environment ``theirs`` (as :func:`environment` recorded it elsewhere) differs
+    from this one: "cpu, versions differ, features unknown; CPU znver3, here rocketlake"."""
+    theirs = theirs if isinstance(theirs, dict) else {}
+    mine = environment()
+    differ = ", ".join(k for k in mine if k in theirs and theirs[k] != mine[k])
+    unknown = "".join(f", {k} unknown" for k in mine if k not in theirs)
+    return f"{differ} differ{unknown}; CPU {theirs.get('cpu', 'unknown')}, here {mine['cpu']}"
+
+
+def made_elsewhere(
+    folder: Path, pattern: str, key: str, what: str = "this sweep"
+) -> tuple[Path, Any] | None:
+    """The first file of ``folder.glob(pattern)`` (by name) whose JSON records ``made.key ==
+    key`` (a digest without the environment, :meth:`Checkpoint.key`), and its document; or None.
+
+    A file found was made in another environment (else it would have this machine's name): a
+    warning says what differs. Its numbers are the same code's with the same seeds, equal in
+    distribution, but not bit for bit what this machine computes. Files that cannot be read are
+    skipped here: their own sweep warns of them."""
+    for other in sorted(Path(folder).glob(pattern)):
+        try:
+            doc = json.loads(other.read_text(encoding="utf-8"))
+            made = doc["made"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # not this sweep's, or warned of when its own sweep reads it
+        if not isinstance(made, dict) or made.get("key") != key:
+            continue
+        warnings.warn(
+            f"{other.name}: {what}, made in another environment "
+            f"({_differences(made.get('environment'))}): read back, the same code and seeds but "
+            "not bit for bit what this machine computes",
+            stacklevel=3,
+        )
+        return other, doc
+    return None
+
+
 def writable(folder: Path) -> None:
     """Make ``folder`` and write a file in it, or raise :class:`OSError`: a checkpoint that
     cannot be kept is refused before any batch runs, not hours later."""
@@ -160,12 +224,22 @@ class Checkpoint:
             "environment": environment(),
         }
         self._sweep = json.dumps(what, sort_keys=True)
+        del what["environment"]
+        self._anywhere = json.dumps(what, sort_keys=True)
         self._saving = True
+
+    def key(self, runs: Sequence[int], machine: bool = True, also: str = "") -> str:
+        """The 24 hex digits that name ``runs`` of this sweep: with ``machine``, on this machine
+        (its environment is in the digest: a batch file's name), else on any (what a file made
+        elsewhere records to be found). ``also``, when given, is digested after the runs."""
+        what = f"{self._sweep if machine else self._anywhere}|{list(runs)}"
+        if also:
+            what += f"|{also}"
+        return hashlib.sha256(what.encode()).hexdigest()[:24]
 
     def path(self, runs: Sequence[int]) -> Path:
         """The file of the batch of ``runs``."""
-        key = hashlib.sha256(f"{self._sweep}|{list(runs)}".encode()).hexdigest()[:24]
-        return self.folder / f"batch-{key}.pkl"
+        return self.folder / f"batch-{self.key(runs)}.pkl"
 
     def load(self, runs: Sequence[int]) -> Any | None:
         """The batch's statistics, or None when it has not run (or its file cannot be read)."""
@@ -183,24 +257,19 @@ class Checkpoint:
         return stats
 
     def save(self, runs: Sequence[int], stats: Any) -> None:
-        """Write the batch's statistics whole: to a temporary file, synced, then renamed. A
-        failure (a full disk) warns once and stops saving; the sweep's numbers are unaffected."""
+        """Write the batch's statistics whole (:func:`write_whole`). A failure (a full disk)
+        warns once and stops saving; the sweep's numbers are unaffected."""
+        what = (self._sweep, list(runs), stats)
+        self._write(self.path(runs), lambda f: pickle.dump(what, f, pickle.HIGHEST_PROTOCOL), True)
+
+    def _write(self, path: Path, write: Callable[[IO[Any]], object], binary: bool) -> None:
+        """:func:`write_whole`, or after a failure a warning, once, and no more saving."""
         if not self._saving:
             return
-        path = self.path(runs)
-        tmp = None
         try:
-            fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=".tmp-", suffix=".pkl")
-            os.fchmod(fd, 0o644)
-            with os.fdopen(fd, "wb") as f:
-                pickle.dump((self._sweep, list(runs), stats), f, pickle.HIGHEST_PROTOCOL)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except (OSError, pickle.PicklingError, TypeError, AttributeError) as err:
-            if tmp:
-                Path(tmp).unlink(missing_ok=True)
+            write_whole(path, write, binary=binary)
+        except (OSError, ValueError, TypeError, AttributeError, pickle.PicklingError) as err:
             self._saving = False
             warnings.warn(
-                f"checkpoint {self.folder}: cannot save ({err}); going on without it", stacklevel=2
+                f"checkpoint {self.folder}: cannot save ({err}); going on without it", stacklevel=3
             )
