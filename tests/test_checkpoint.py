@@ -4,15 +4,18 @@ import dataclasses
 import hashlib
 import json
 import shutil
+import struct
 from pathlib import Path
 
+import numpy as np
 import pytest
 from tltrack.app import app
 from tltrack.config import make_config
 from tltrack.config.load import load_config
 from tltrack.engine import montecarlo
 from tltrack.engine.checkpoint import Checkpoint, code_digest, environment, plugin_digest
-from tltrack.engine.montecarlo import run_sweep
+from tltrack.engine.montecarlo import FilterStats, run_batch, run_sweep
+from tltrack.filters.kinds import FILTERS
 from tltrack.studies.common import Runner
 from tltrack.studies.finished import Finished
 from typer.testing import CliRunner
@@ -279,3 +282,36 @@ def test_the_keys_are_the_digests_that_named_the_files_before_them(tmp_path):
     finished = Finished(tmp_path, cfgs, NAMES, 3, True)
     assert finished.file.name == f"sweep-{machine}-b3-timed.json"
     assert finished.key == digest(f"{json.dumps(what, sort_keys=True)}|{runs}|-b3-timed")
+
+
+def _bits(value):
+    """``value``'s type and bits: arrays by dtype, shape and bytes, floats by their 8 bytes."""
+    if isinstance(value, np.ndarray):
+        return ("array", value.dtype.str, value.shape, value.tobytes())
+    if isinstance(value, list):
+        return [_bits(v) for v in value]
+    return type(value).__name__, struct.pack("<d", value) if isinstance(value, float) else value
+
+
+@pytest.mark.filterwarnings("error")
+def test_every_filter_kinds_statistics_round_trip_through_json():
+    # K past one NIS window, an rpf that regularises: every field holds something
+    cfg = make_config(
+        {"preset": "arasaratnam-haykin", "K": 24, "particles": 60, "rpf_bandwidth": 0.5}
+    )
+    names = [f"{role}{kind}" for kind in FILTERS.names() for role in ("", "tl-")]
+    stats = run_batch(cfg, names, [0, 1], timing=True, keep_tracks=True)
+    assert set(names) <= set(stats)
+    assert stats["tl-rpf"].regularised and stats["tl-pf"].windows and stats["pf"].tracks
+    odd = stats["pf"]  # what a diverged or empty run leaves
+    odd.sq_err[0], odd.nees[1], odd.run_mse[0][0] = np.nan, np.inf, -0.0
+    odd.nis_sum = float("nan")
+    fields = [f.name for f in dataclasses.fields(FilterStats)]
+    for name, s in stats.items():
+        doc = s.to_json()
+        assert list(doc) == fields
+        back = FilterStats.from_json(json.loads(json.dumps(doc)))
+        for f in fields:
+            assert _bits(getattr(back, f)) == _bits(getattr(s, f)), (name, f)
+    with pytest.raises(ValueError, match=r"sums of \(24,\) and \(24,\) steps, K = 23"):
+        FilterStats.from_json({**stats["ukf"].to_json(), "K": 23})
