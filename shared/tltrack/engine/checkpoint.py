@@ -31,6 +31,15 @@ The files it writes in the folder:
 - ``batch-<key>.pkl``, one per finished batch, ``key`` the digest of its runs
   (:meth:`~tltrack.engine.checkpoint.Checkpoint.key`). They are pickles: resume only from a folder
   that you wrote.
+- ``prefix-<key>-b<batch size>.json``, one per sweep, ``key`` the digest of all its runs: the
+  merged statistics of its first batches, up to the first one not yet finished, rewritten as that
+  prefix grows. Plain JSON (Python's floats round-trip through it exactly), small enough to
+  commit: with it alone a sweep resumes after its prefix, bit for bit, when the batch files are
+  gone (another session). It also records the sweep's digest without the environment and the
+  environment it was made in: a prefix of the same sweep made elsewhere (another CPU, other
+  library versions) is read when this machine has none, with a warning
+  (:func:`~tltrack.engine.checkpoint.made_elsewhere`), and the prefixes that continue it keep
+  saying so.
 
 :mod:`tltrack.studies.finished` keeps a whole finished sweep in the same folder, named alike.
 """
@@ -67,6 +76,8 @@ CPU_VARIABLES = (
     "NPY_DISABLE_CPU_FEATURES",
     "OPENBLAS_CORETYPE",
 )
+#: the layout of a prefix file; another is ignored
+PREFIX_FORMAT = 1
 
 
 def _tree(source: bytes) -> str:
@@ -210,7 +221,8 @@ def writable(folder: Path) -> None:
 
 
 class Checkpoint:
-    """One sweep's batches in ``folder``: :meth:`load` the ones done, :meth:`save` each new one."""
+    """One sweep's batches in ``folder``: :meth:`load` the ones done, :meth:`save` each new one;
+    :meth:`load_prefix` and :meth:`save_prefix` the merged statistics of its first batches."""
 
     def __init__(self, folder: Path, cfgs: Sequence[Config], names: Sequence[str]) -> None:
         self.folder = Path(folder)
@@ -227,6 +239,8 @@ class Checkpoint:
         del what["environment"]
         self._anywhere = json.dumps(what, sort_keys=True)
         self._saving = True
+        #: the environments, other than this one, that made batches of the prefix read
+        self._elsewhere: list[Any] = []
 
     def key(self, runs: Sequence[int], machine: bool = True, also: str = "") -> str:
         """The 24 hex digits that name ``runs`` of this sweep: with ``machine``, on this machine
@@ -261,6 +275,76 @@ class Checkpoint:
         warns once and stops saving; the sweep's numbers are unaffected."""
         what = (self._sweep, list(runs), stats)
         self._write(self.path(runs), lambda f: pickle.dump(what, f, pickle.HIGHEST_PROTOCOL), True)
+
+    def prefix_path(self, batches: Sequence[Sequence[int]]) -> Path:
+        """The prefix file of the sweep cut into ``batches`` (all its runs, in order)."""
+        key = self.key([r for b in batches for r in b])
+        return self.folder / f"prefix-{key}-b{len(batches[0])}.json"
+
+    def _prefix_key(self, batches: Sequence[Sequence[int]]) -> str:
+        """The digest of the sweep's prefix without the environment: its runs and their cut."""
+        return self.key([r for b in batches for r in b], machine=False, also=f"b{len(batches[0])}")
+
+    def load_prefix(
+        self, batches: Sequence[Sequence[int]], decode: Callable[[Any, int], Any]
+    ) -> tuple[int, Any] | None:
+        """How many of ``batches`` the prefix file holds, and their merged statistics, which
+        ``decode(plain, runs)`` makes of its plain JSON (raising ``ValueError``, ``KeyError`` or
+        ``TypeError`` when they are not those of ``runs`` runs); None when there is none.
+
+        This machine's file is read first, else one of the same sweep made elsewhere, with a
+        warning (:func:`made_elsewhere`). A file that cannot be read or does not fit the sweep
+        warns and is ignored: the batches are read from their files, or run again."""
+        if not batches:
+            return None
+        path, key = self.prefix_path(batches), self._prefix_key(batches)
+        doc: Any = None
+        try:
+            if path.exists():
+                doc = json.loads(path.read_text(encoding="utf-8"))
+            else:
+                what = "this sweep's first batches"
+                found = made_elsewhere(self.folder, f"prefix-*-b{len(batches[0])}.json", key, what)
+                if found is None:
+                    return None
+                path, doc = found
+            if doc["format"] != PREFIX_FORMAT:
+                raise ValueError(f"format {doc['format']}")
+            made = doc["made"]
+            if made["key"] != key:
+                raise ValueError("another sweep's")
+            done = doc["batches"]
+            if not isinstance(done, int) or not 1 <= done <= len(batches):
+                raise ValueError(f"{done!r} batches of {len(batches)}")
+            stats = decode(doc["stats"], sum(len(b) for b in batches[:done]))
+            elsewhere = list(made.get("elsewhere", []))
+            if made["environment"] != environment():  # read from another machine's file
+                elsewhere.append(made["environment"])
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
+            warnings.warn(
+                f"{path}: unreadable ({err}); ignored, its batches are read from their files or "
+                "run again",
+                stacklevel=2,
+            )
+            return None
+        if elsewhere and path == self.prefix_path(batches):
+            warnings.warn(
+                f"{path.name}: this sweep's first batches were made in another environment "
+                f"({_differences(elsewhere[0])}): read back, the same code and seeds but not bit "
+                "for bit what this machine computes",
+                stacklevel=2,
+            )
+        self._elsewhere = elsewhere
+        return done, stats
+
+    def save_prefix(self, batches: Sequence[Sequence[int]], done: int, stats: Any) -> None:
+        """Write the merged statistics of the first ``done`` of ``batches``, as plain JSON
+        ``stats``, whole (:func:`write_whole`); a failure warns once and stops saving."""
+        made: dict[str, Any] = {"key": self._prefix_key(batches), "environment": environment()}
+        if self._elsewhere:  # the prefix read was made elsewhere: this one is partly so
+            made["elsewhere"] = self._elsewhere
+        doc = {"format": PREFIX_FORMAT, "made": made, "batches": done, "stats": stats}
+        self._write(self.prefix_path(batches), lambda f: f.write(json.dumps(doc)), False)
 
     def _write(self, path: Path, write: Callable[[IO[Any]], object], binary: bool) -> None:
         """:func:`write_whole`, or after a failure a warning, once, and no more saving."""

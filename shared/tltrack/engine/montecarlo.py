@@ -523,6 +523,9 @@ def run_sweep(
     it completes; results are merged in batch order, so they do not depend on which finished first.
     With a ``checkpoint`` folder, each finished batch is kept there and a batch found there is
     read instead of run (:mod:`tltrack.engine.checkpoint`): a sweep that was stopped resumes.
+    The merged statistics of the first batches, as far as all have finished, are kept there too,
+    as one small JSON file that is read first: its batches count as merged at once (``progress``
+    hears their runs in one call), and only the later ones are read from their files or run.
     """
     check_sweep(cfgs)
     if executor is not None and workers is not None:
@@ -545,6 +548,23 @@ def run_sweep(
     done: dict[int, list[dict[str, FilterStats]]] = {}
     merged = 0
 
+    def decode(plain: Any, runs: int) -> list[dict[str, FilterStats]]:
+        """A prefix's merged statistics from their JSON, checked to hold ``runs`` runs."""
+        stats = [{n: FilterStats.from_json(s) for n, s in part.items()} for part in plain]
+        if len(stats) != len(cfgs) or not all(stats):
+            raise ValueError(f"{len(stats)} configurations' statistics, not {len(cfgs)}")
+        for part in stats:
+            for name, s in part.items():
+                seen = {sum(len(a) for a in s.run_mse), sum(len(a) for a in s.tail_err)}
+                if seen != {runs}:
+                    raise ValueError(f"{name}: {sorted(seen)} runs, not {runs}")
+        return stats
+
+    if kept and (prefix := kept.load_prefix(batches, decode)):
+        merged, totals = prefix  # batches 0..merged-1, merged in order once for all
+        if progress:
+            progress(sum(len(b) for b in batches[:merged]))
+
     def finished(i: int, stats: list[dict[str, FilterStats]], *, new: bool = True) -> None:
         nonlocal merged
         if kept and new:
@@ -552,12 +572,18 @@ def run_sweep(
         if progress:
             progress(len(batches[i]))
         done[i] = stats
+        before = merged
         while merged in done:  # in batch order: float sums in a fixed order
             absorb(done.pop(merged))
             merged += 1
+        if kept and merged > before:  # the totals serialised now: no copy outlives a merge
+            plain = [{name: s.to_json() for name, s in total.items()} for total in totals]
+            kept.save_prefix(batches, merged, plain)
 
     todo = []  # the batches not read back from the checkpoint
     for i, b in enumerate(batches):
+        if i < merged:
+            continue  # in the prefix
         stats = kept.load(b) if kept else None
         if stats is None:
             todo.append(i)

@@ -23,6 +23,9 @@ this machine's name is there, one of the same sweep made elsewhere is read back,
 seeds, equal in distribution, but not bit for bit what this machine would compute (the
 manoeuvres study's first 8 sweeps, made on two CPUs, differ by at most 1.3e-10 m of run RMSE:
 ``papers/manoeuvres/other_machine.py``). Delete it to run the sweep here instead.
+
+A sweep that has not finished carries over by its prefix file instead
+(:mod:`tltrack.engine.checkpoint`): the merged statistics of its first batches.
 """
 
 from __future__ import annotations
