@@ -179,6 +179,10 @@ def test_a_recorded_truth_edited_under_the_same_name_is_run_again(tmp_path, batc
     run_sweep([cfg], ["pf"], **run)
     run_sweep([cfg], ["pf"], **run)
     assert batches_run == [[0, 1, 2]]  # the second read it back
+    (tmp_path / "elsewhere").mkdir()
+    copy = shutil.copy(track, tmp_path / "elsewhere" / "renamed.csv")
+    run_sweep([load_config(None, truth_file=copy, K=8, runs=3, particles=100)], ["pf"], **run)
+    assert batches_run == [[0, 1, 2]]  # the same bytes under another path: read back
     track.write_text(track.read_text() + "\n")  # the same track, other bytes
     run_sweep([cfg], ["pf"], **run)
     assert batches_run == [[0, 1, 2], [0, 1, 2]]

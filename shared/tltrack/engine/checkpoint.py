@@ -10,7 +10,8 @@ the merge's order is the batches' order either way.
 A batch's file is named by a digest of all that determines its statistics on this machine:
 
 - the configurations, all but ``runs`` (so a 1000-run sweep reuses the batches of a 200-run one
-  made with the same batch size), and the bytes of a recorded truth's file;
+  made with the same batch size), and the bytes of a recorded truth's file, which name it instead
+  of its path (the same file copied to another folder or name keeps the batches);
 - the filters and the batch's runs;
 - the code that computes them: the syntax trees of the packages ``models``, ``filters``,
   ``config`` and ``engine`` and of ``declare.py``, without their docstrings (a comment or a
@@ -228,7 +229,11 @@ class Checkpoint:
         self.folder = Path(folder)
         writable(self.folder)
         what = {
-            "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
+            # a recorded truth by its bytes, not its path: the path digested as None, as it is
+            # for a sweep without a truth file (whose names this keeps)
+            "configs": [
+                {**c.model_dump(mode="json", exclude={"runs"}), "truth_file": None} for c in cfgs
+            ],
             "truth_files": [_truth_digest(c) for c in cfgs],
             "filters": list(names),
             "code": code_digest(),
