@@ -333,8 +333,22 @@ def test_a_stopped_sweep_resumes_from_its_prefix_file_alone(tmp_path, batches_ru
     assert heard == [3, 3, 1]  # the prefix's runs at once
     # every statistic of every filter, bit for bit: the prefixes of both are the same file
     file, doc = _prefix(tmp_path)
-    assert doc["batches"] == 3
+    assert doc["batches"] == 2  # the full batches: [6] is not one of a longer sweep
     assert file.read_bytes() == (tmp_path / "whole" / file.name).read_bytes()
+
+
+def test_a_longer_sweep_goes_on_from_a_shorter_ones_prefix(tmp_path, batches_run):
+    _sweep(_cfgs(runs=7), tmp_path)  # batches of 3, 3 and 1: a prefix of the first two
+    _drop(tmp_path, "batch-*.pkl")
+    batches_run.clear()
+    _same(_sweep(_cfgs(runs=10), tmp_path), _sweep(_cfgs(runs=10)))
+    assert batches_run[:2] == [[6, 7, 8], [9]]  # the 7-run sweep's [6] is not a batch here
+    assert _prefix(tmp_path)[1]["batches"] == 3
+    batches_run.clear()
+    with pytest.warns(UserWarning, match="of a longer sweep, .* neither used nor overwritten"):
+        _sweep(_cfgs(runs=4), tmp_path)
+    assert batches_run == [[0, 1, 2], [3]]
+    assert _prefix(tmp_path)[1]["batches"] == 3
 
 
 def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batches_run):
@@ -354,7 +368,7 @@ def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batch
         _same(_sweep(cfgs, tmp_path), whole)
     assert batches_run == [[3, 4, 5], [6]]
     _drop(tmp_path, "batch-*.pkl")
-    _sweep(_cfgs(runs=6), tmp_path)  # another sweep: not that file's, nor this one's, so run
+    _sweep(_cfgs(runs=6, seed=5), tmp_path)  # another sweep: not that file's, nor this one's
     assert batches_run[2:] == [[0, 1, 2], [3, 4, 5]]
 
 
@@ -373,7 +387,7 @@ def test_a_damaged_prefix_file_is_ignored_with_a_warning(tmp_path, batches_run, 
     with pytest.warns(UserWarning, match="unreadable .* ignored"):
         _same(_sweep(cfgs, tmp_path), whole)
     assert batches_run == [[0, 1, 2], [3, 4, 5], [6]]
-    assert _prefix(tmp_path)[1]["batches"] == 3  # rewritten
+    assert _prefix(tmp_path)[1]["batches"] == 2  # rewritten
 
 
 def _bits(value):

@@ -32,15 +32,16 @@ The files it writes in the folder:
 - ``batch-<key>.pkl``, one per finished batch, ``key`` the digest of its runs
   (:meth:`~tltrack.engine.checkpoint.Checkpoint.key`). They are pickles: resume only from a folder
   that you wrote.
-- ``prefix-<key>-b<batch size>.json``, one per sweep, ``key`` the digest of all its runs: the
-  merged statistics of its first batches, up to the first one not yet finished, rewritten as that
-  prefix grows. Plain JSON (Python's floats round-trip through it exactly), small enough to
-  commit: with it alone a sweep resumes after its prefix, bit for bit, when the batch files are
-  gone (another session). It also records the sweep's digest without the environment and the
-  environment it was made in: a prefix of the same sweep made elsewhere (another CPU, other
-  library versions) is read when this machine has none, with a warning
-  (:func:`~tltrack.engine.checkpoint.made_elsewhere`), and the prefixes that continue it keep
-  saying so.
+- ``prefix-<key>-b<batch size>.json``, one per sweep and batch size, ``key`` the digest of the
+  sweep without its run count: the merged statistics of its first full batches, up to the first
+  one not yet finished, rewritten as that prefix grows. A longer sweep goes on from a shorter
+  one's (1000 runs from 200), since their first batches are the same. Plain JSON (Python's
+  floats round-trip through it exactly), small enough to commit: with it alone a sweep resumes
+  after its prefix, bit for bit, when the batch files are gone (another session). It also
+  records the sweep's digest without the environment and the environment it was made in: a
+  prefix of the same sweep made elsewhere (another CPU, other library versions) is read when
+  this machine has none, with a warning (:func:`~tltrack.engine.checkpoint.made_elsewhere`), and
+  the prefixes that continue it keep saying so.
 
 :mod:`tltrack.studies.finished` keeps a whole finished sweep in the same folder, named alike.
 """
@@ -212,6 +213,12 @@ def made_elsewhere(
     return None
 
 
+def _full(batches: Sequence[Sequence[int]]) -> int:
+    """How many of ``batches`` (runs in order, cut into batches of the first one's size) are
+    full: all but a short last one."""
+    return len(batches) - (len(batches[-1]) < len(batches[0]))
+
+
 def writable(folder: Path) -> None:
     """Make ``folder`` and write a file in it, or raise :class:`OSError`: a checkpoint that
     cannot be kept is refused before any batch runs, not hours later."""
@@ -244,6 +251,7 @@ class Checkpoint:
         del what["environment"]
         self._anywhere = json.dumps(what, sort_keys=True)
         self._saving = True
+        self._saving_prefix = True  # not over a longer sweep's prefix
         #: the environments, other than this one, that made batches of the prefix read
         self._elsewhere: list[Any] = []
 
@@ -281,14 +289,15 @@ class Checkpoint:
         what = (self._sweep, list(runs), stats)
         self._write(self.path(runs), lambda f: pickle.dump(what, f, pickle.HIGHEST_PROTOCOL), True)
 
-    def prefix_path(self, batches: Sequence[Sequence[int]]) -> Path:
-        """The prefix file of the sweep cut into ``batches`` (all its runs, in order)."""
-        key = self.key([r for b in batches for r in b])
-        return self.folder / f"prefix-{key}-b{len(batches[0])}.json"
+    def prefix_path(self, batch_size: int) -> Path:
+        """The prefix file of this sweep's first batches of ``batch_size`` runs. The run count is
+        not in its name: a 1000-run sweep goes on from a 200-run one's prefix."""
+        key = self.key([], also=f"prefix-b{batch_size}")
+        return self.folder / f"prefix-{key}-b{batch_size}.json"
 
-    def _prefix_key(self, batches: Sequence[Sequence[int]]) -> str:
-        """The digest of the sweep's prefix without the environment: its runs and their cut."""
-        return self.key([r for b in batches for r in b], machine=False, also=f"b{len(batches[0])}")
+    def _prefix_key(self, batch_size: int) -> str:
+        """The digest of the prefix without the environment, to be found from elsewhere."""
+        return self.key([], machine=False, also=f"prefix-b{batch_size}")
 
     def load_prefix(
         self, batches: Sequence[Sequence[int]], decode: Callable[[Any, int], Any]
@@ -299,17 +308,20 @@ class Checkpoint:
 
         This machine's file is read first, else one of the same sweep made elsewhere, with a
         warning (:func:`made_elsewhere`). A file that cannot be read or does not fit the sweep
-        warns and is ignored: the batches are read from their files, or run again."""
+        warns and is ignored: the batches are read from their files, or run again. A prefix of
+        more runs than this sweep's full batches (a longer sweep's) is neither used nor
+        overwritten."""
         if not batches:
             return None
-        path, key = self.prefix_path(batches), self._prefix_key(batches)
+        bs = len(batches[0])
+        path, key = self.prefix_path(bs), self._prefix_key(bs)
         doc: Any = None
         try:
             if path.exists():
                 doc = json.loads(path.read_text(encoding="utf-8"))
             else:
                 what = "this sweep's first batches"
-                found = made_elsewhere(self.folder, f"prefix-*-b{len(batches[0])}.json", key, what)
+                found = made_elsewhere(self.folder, f"prefix-*-b{bs}.json", key, what)
                 if found is None:
                     return None
                 path, doc = found
@@ -319,9 +331,17 @@ class Checkpoint:
             if made["key"] != key:
                 raise ValueError("another sweep's")
             done = doc["batches"]
-            if not isinstance(done, int) or not 1 <= done <= len(batches):
-                raise ValueError(f"{done!r} batches of {len(batches)}")
-            stats = decode(doc["stats"], sum(len(b) for b in batches[:done]))
+            if not isinstance(done, int) or done < 1:
+                raise ValueError(f"{done!r} batches")
+            if done > _full(batches):
+                self._saving_prefix = False
+                warnings.warn(
+                    f"{path.name}: the first {done * bs} runs of a longer sweep, more than this "
+                    f"one's {_full(batches) * bs} in full batches; neither used nor overwritten",
+                    stacklevel=2,
+                )
+                return None
+            stats = decode(doc["stats"], done * bs)
             elsewhere = list(made.get("elsewhere", []))
             if made["environment"] != environment():  # read from another machine's file
                 elsewhere.append(made["environment"])
@@ -332,7 +352,7 @@ class Checkpoint:
                 stacklevel=2,
             )
             return None
-        if elsewhere and path == self.prefix_path(batches):
+        if elsewhere and path == self.prefix_path(bs):
             warnings.warn(
                 f"{path.name}: this sweep's first batches were made in another environment "
                 f"({_differences(elsewhere[0])}): read back, the same code and seeds but not bit "
@@ -344,12 +364,16 @@ class Checkpoint:
 
     def save_prefix(self, batches: Sequence[Sequence[int]], done: int, stats: Any) -> None:
         """Write the merged statistics of the first ``done`` of ``batches``, as plain JSON
-        ``stats``, whole (:func:`write_whole`); a failure warns once and stops saving."""
-        made: dict[str, Any] = {"key": self._prefix_key(batches), "environment": environment()}
+        ``stats``, whole (:func:`write_whole`); a failure warns once and stops saving. A prefix
+        ending in a short last batch is not written: it would fit no longer sweep."""
+        if not self._saving_prefix or done > _full(batches):
+            return
+        bs = len(batches[0])
+        made: dict[str, Any] = {"key": self._prefix_key(bs), "environment": environment()}
         if self._elsewhere:  # the prefix read was made elsewhere: this one is partly so
             made["elsewhere"] = self._elsewhere
         doc = {"format": PREFIX_FORMAT, "made": made, "batches": done, "stats": stats}
-        self._write(self.prefix_path(batches), lambda f: f.write(json.dumps(doc)), False)
+        self._write(self.prefix_path(bs), lambda f: f.write(json.dumps(doc)), False)
 
     def _write(self, path: Path, write: Callable[[IO[Any]], object], binary: bool) -> None:
         """:func:`write_whole`, or after a failure a warning, once, and no more saving."""
