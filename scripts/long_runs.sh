@@ -90,8 +90,9 @@ done
 
 # ---- papers/manoeuvres: one model against the target class's modes on every truth
 # Both keep their batches in one checkpoint folder: stopped, the same command resumes, and the
-# 1000 runs reuse the 200's. Git ignores the batches but not the finished sweeps (sweep-*.json):
-# committed, they carry the 1000 runs (about 3.2 h on 2 cores at the 200's rate) across sessions.
+# 1000 runs reuse the 200's. Git ignores the batches but not the finished sweeps (sweep-*.json)
+# nor the prefixes of unfinished ones (prefix-*.json): committed, they carry the 1000 runs (about
+# 3.2 h on 2 cores at the 200's rate) across sessions.
 run "$MANOEUVRES" manoeuvres study manoeuvres --runs 200 --out "$MANOEUVRES" \
     --checkpoint "$MANOEUVRES/checkpoint"
 run "$MANOEUVRES" manoeuvres-1000 study manoeuvres --runs 1000 --out "$MANOEUVRES/n1000" \

@@ -1,18 +1,23 @@
 """A sweep stopped part-way resumes from its checkpoint folder, to the uninterrupted numbers."""
 
 import dataclasses
+import hashlib
 import json
 import shutil
+import struct
 from pathlib import Path
 
+import numpy as np
 import pytest
 from tltrack.app import app
 from tltrack.config import make_config
 from tltrack.config.load import load_config
 from tltrack.engine import montecarlo
-from tltrack.engine.checkpoint import Checkpoint, code_digest
-from tltrack.engine.montecarlo import run_sweep
+from tltrack.engine.checkpoint import Checkpoint, code_digest, environment, plugin_digest
+from tltrack.engine.montecarlo import FilterStats, run_batch, run_sweep
+from tltrack.filters.kinds import FILTERS
 from tltrack.studies.common import Runner
+from tltrack.studies.finished import Finished
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
@@ -44,6 +49,36 @@ class StopError(Exception):
     """What a kill would be."""
 
 
+def _stopped(cfgs, folder):
+    """Run the sweep of ``cfgs`` (7 runs: batches of 3, 3 and 1) with ``folder`` as its checkpoint
+    and stop it as a kill would, as it hears of its second batch: both batches are kept, the first
+    alone merged (and so in the prefix file)."""
+    calls = []
+
+    def stop_after_two(n):
+        calls.append(n)
+        if len(calls) == 2:
+            raise StopError
+
+    with pytest.raises(StopError):
+        run_sweep(
+            cfgs, NAMES, batch_size=3, workers=1, time_steps=False, checkpoint=folder,
+            progress=stop_after_two,
+        )  # fmt: skip
+
+
+def _drop(folder, pattern):
+    """Delete the files of ``folder`` that match ``pattern``."""
+    for file in folder.glob(pattern):
+        file.unlink()
+
+
+def _prefix(folder):
+    """The prefix file in ``folder`` and its document."""
+    (file,) = folder.glob("prefix-*.json")
+    return file, json.loads(file.read_text())
+
+
 @pytest.fixture
 def batches_run(monkeypatch):
     """The runs of every batch that the engine actually ran (not read back), in this process
@@ -73,19 +108,7 @@ def test_a_stopped_sweep_resumes_to_the_uninterrupted_numbers(tmp_path, batches_
     cfgs = _cfgs()
     whole = _sweep(cfgs)
     batches_run.clear()
-
-    calls = []
-
-    def stop_after_two(n):
-        calls.append(n)
-        if len(calls) == 2:
-            raise StopError  # as a kill would, after the second batch was kept
-
-    with pytest.raises(StopError):
-        run_sweep(
-            cfgs, NAMES, batch_size=3, workers=1, time_steps=False, checkpoint=tmp_path,
-            progress=stop_after_two,
-        )  # fmt: skip
+    _stopped(cfgs, tmp_path)
     assert batches_run == [[0, 1, 2], [3, 4, 5]]
     assert len(list(tmp_path.glob("batch-*.pkl"))) == 2
     batches_run.clear()
@@ -109,6 +132,7 @@ def test_more_runs_reuse_the_batches_of_fewer_and_other_settings_reuse_none(tmp_
 def test_an_unreadable_batch_file_is_run_again_with_a_warning(tmp_path, batches_run):
     cfgs = _cfgs(runs=4)
     whole = _sweep(cfgs, tmp_path)
+    _drop(tmp_path, "prefix-*.json")  # else read first, and the batch files not at all
     victim = sorted(tmp_path.glob("batch-*.pkl"))[0]
     victim.write_bytes(victim.read_bytes()[:40])  # as a crash of the disk's cache might leave it
     batches_run.clear()
@@ -141,6 +165,7 @@ def test_a_pool_resumes_from_batches_that_are_not_a_prefix(tmp_path):
     kept = Checkpoint(tmp_path, cfgs, NAMES)
     for runs in ([0, 1, 2], [6, 7, 8], [12]):
         kept.path(runs).unlink()
+    _drop(tmp_path, "prefix-*.json")
     assert len(list(tmp_path.glob("batch-*.pkl"))) == 2
     _same(run_sweep(cfgs, NAMES, checkpoint=tmp_path, **kw), whole)
     assert len(list(tmp_path.glob("batch-*.pkl"))) == 5
@@ -154,6 +179,10 @@ def test_a_recorded_truth_edited_under_the_same_name_is_run_again(tmp_path, batc
     run_sweep([cfg], ["pf"], **run)
     run_sweep([cfg], ["pf"], **run)
     assert batches_run == [[0, 1, 2]]  # the second read it back
+    (tmp_path / "elsewhere").mkdir()
+    copy = shutil.copy(track, tmp_path / "elsewhere" / "renamed.csv")
+    run_sweep([load_config(None, truth_file=copy, K=8, runs=3, particles=100)], ["pf"], **run)
+    assert batches_run == [[0, 1, 2]]  # the same bytes under another path: read back
     track.write_text(track.read_text() + "\n")  # the same track, other bytes
     run_sweep([cfg], ["pf"], **run)
     assert batches_run == [[0, 1, 2], [0, 1, 2]]
@@ -195,7 +224,7 @@ def test_a_save_that_fails_warns_and_the_sweep_goes_on(tmp_path, monkeypatch):
     monkeypatch.setattr("tltrack.engine.checkpoint.os.replace", full)
     with pytest.warns(UserWarning, match="cannot save"):
         _same(_sweep(cfgs, tmp_path), whole)
-    assert not list(tmp_path.glob("*.pkl"))  # nor a temporary file left behind
+    assert not list(tmp_path.iterdir())  # no batch, no prefix, nor a temporary file left behind
 
 
 def _study_sweep(folder, batch_size=3, progress=None):
@@ -204,12 +233,12 @@ def _study_sweep(folder, batch_size=3, progress=None):
 
 
 def _sweep_file_alone(folder):
-    """A study's sweep, run with ``folder`` as its checkpoint, and its sweep file, every batch
-    file deleted: what a copy of the sweep files alone carries."""
+    """A study's sweep, run with ``folder`` as its checkpoint, and its sweep file, every batch and
+    prefix file deleted: what a copy of the sweep files alone carries."""
     results = _study_sweep(folder)
     (kept,) = folder.glob("sweep-*.json")
-    for batch in folder.glob("batch-*.pkl"):
-        batch.unlink()
+    _drop(folder, "batch-*.pkl")
+    _drop(folder, "prefix-*.json")
     return results, kept
 
 
@@ -252,3 +281,143 @@ def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run)
         _same(_study_sweep(tmp_path), whole)
     assert batches_run == [[0, 1, 2], [3]]
     assert len(json.loads(kept.read_text())["results"][0]["pf"]["run_rmse"]) == 4  # rewritten
+
+
+def test_the_keys_are_the_digests_that_named_the_files_before_them(tmp_path):
+    """Batch and sweep files (papers/manoeuvres/results/checkpoint) were named by these digests
+    before :meth:`Checkpoint.key` computed them: they are found by it."""
+    cfgs, runs = _cfgs(runs=4), list(range(4))
+    what = {
+        "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
+        "truth_files": [None, None],
+        "filters": NAMES,
+        "code": code_digest(),
+        "plugins": plugin_digest(),
+        "environment": environment(),
+    }
+
+    def digest(text):
+        return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+    kept = Checkpoint(tmp_path, cfgs, NAMES)
+    machine = digest(f"{json.dumps(what, sort_keys=True)}|{runs}")
+    assert kept.path(runs).name == f"batch-{machine}.pkl" and kept.key(runs) == machine
+    del what["environment"]
+    finished = Finished(tmp_path, cfgs, NAMES, 3, True)
+    assert finished.file.name == f"sweep-{machine}-b3-timed.json"
+    assert finished.key == digest(f"{json.dumps(what, sort_keys=True)}|{runs}|-b3-timed")
+
+
+def _prefix_alone(folder, cfgs):
+    """The sweep of ``cfgs`` stopped after its first merged batch, every batch file deleted: what
+    a copy of its prefix file alone carries; that file."""
+    _stopped(cfgs, folder)
+    _drop(folder, "batch-*.pkl")
+    file, doc = _prefix(folder)
+    assert doc["batches"] == 1
+    return file
+
+
+def test_a_stopped_sweep_resumes_from_its_prefix_file_alone(tmp_path, batches_run):
+    cfgs = _cfgs()
+    whole = _sweep(cfgs, tmp_path / "whole")
+    _prefix_alone(tmp_path, cfgs)
+    batches_run.clear()
+    heard: list[int] = []
+    resumed = run_sweep(
+        cfgs, NAMES, batch_size=3, workers=1, time_steps=False, checkpoint=tmp_path,
+        progress=heard.append,
+    )  # fmt: skip
+    _same(resumed, whole)
+    assert batches_run == [[3, 4, 5], [6]]
+    assert heard == [3, 3, 1]  # the prefix's runs at once
+    # every statistic of every filter, bit for bit: the prefixes of both are the same file
+    file, doc = _prefix(tmp_path)
+    assert doc["batches"] == 2  # the full batches: [6] is not one of a longer sweep
+    assert file.read_bytes() == (tmp_path / "whole" / file.name).read_bytes()
+
+
+def test_a_longer_sweep_goes_on_from_a_shorter_ones_prefix(tmp_path, batches_run):
+    _sweep(_cfgs(runs=7), tmp_path)  # batches of 3, 3 and 1: a prefix of the first two
+    _drop(tmp_path, "batch-*.pkl")
+    batches_run.clear()
+    _same(_sweep(_cfgs(runs=10), tmp_path), _sweep(_cfgs(runs=10)))
+    assert batches_run[:2] == [[6, 7, 8], [9]]  # the 7-run sweep's [6] is not a batch here
+    assert _prefix(tmp_path)[1]["batches"] == 3
+    batches_run.clear()
+    with pytest.warns(UserWarning, match="of a longer sweep, .* neither used nor overwritten"):
+        _sweep(_cfgs(runs=4), tmp_path)
+    assert batches_run == [[0, 1, 2], [3]]
+    assert _prefix(tmp_path)[1]["batches"] == 3
+
+
+def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batches_run):
+    cfgs = _cfgs()
+    whole = _sweep(cfgs)
+    file = _prefix_alone(tmp_path, cfgs)
+    doc = json.loads(file.read_text())
+    doc["made"]["environment"]["cpu"] = "another-cpu"  # its name differs as its digest does
+    file.unlink()
+    (tmp_path / "prefix-000000000000000000000000-b3.json").write_text(json.dumps(doc))
+    batches_run.clear()
+    with pytest.warns(UserWarning, match=r"another environment \(cpu differ; CPU another-cpu"):
+        _same(_sweep(cfgs, tmp_path), whole)
+    assert batches_run == [[3, 4, 5], [6]]
+    # the prefix that continued it, of this machine's name, says that it is partly another's
+    with pytest.warns(UserWarning, match=r"were made in another environment \(cpu differ"):
+        _same(_sweep(cfgs, tmp_path), whole)
+    assert batches_run == [[3, 4, 5], [6]]
+    _drop(tmp_path, "batch-*.pkl")
+    _sweep(_cfgs(runs=6, seed=5), tmp_path)  # another sweep: not that file's, nor this one's
+    assert batches_run[2:] == [[0, 1, 2], [3, 4, 5]]
+
+
+@pytest.mark.parametrize("damage", ["cut short", "a run short"])
+def test_a_damaged_prefix_file_is_ignored_with_a_warning(tmp_path, batches_run, damage):
+    cfgs = _cfgs()
+    whole = _sweep(cfgs)
+    file = _prefix_alone(tmp_path, cfgs)
+    if damage == "cut short":
+        file.write_bytes(file.read_bytes()[:100])
+    else:
+        doc = json.loads(file.read_text())
+        doc["stats"][0]["pf"]["run_mse"][0].pop()
+        file.write_text(json.dumps(doc))
+    batches_run.clear()
+    with pytest.warns(UserWarning, match="unreadable .* ignored"):
+        _same(_sweep(cfgs, tmp_path), whole)
+    assert batches_run == [[0, 1, 2], [3, 4, 5], [6]]
+    assert _prefix(tmp_path)[1]["batches"] == 2  # rewritten
+
+
+def _bits(value):
+    """``value``'s type and bits: arrays by dtype, shape and bytes, floats by their 8 bytes."""
+    if isinstance(value, np.ndarray):
+        return ("array", value.dtype.str, value.shape, value.tobytes())
+    if isinstance(value, list):
+        return [_bits(v) for v in value]
+    return type(value).__name__, struct.pack("<d", value) if isinstance(value, float) else value
+
+
+@pytest.mark.filterwarnings("error")
+def test_every_filter_kinds_statistics_round_trip_through_json():
+    # K past one NIS window, an rpf that regularises: every field holds something
+    cfg = make_config(
+        {"preset": "arasaratnam-haykin", "K": 24, "particles": 60, "rpf_bandwidth": 0.5}
+    )
+    names = [f"{role}{kind}" for kind in FILTERS.names() for role in ("", "tl-")]
+    stats = run_batch(cfg, names, [0, 1], timing=True, keep_tracks=True)
+    assert set(names) <= set(stats)
+    assert stats["tl-rpf"].regularised and stats["tl-pf"].windows and stats["pf"].tracks
+    odd = stats["pf"]  # what a diverged or empty run leaves
+    odd.sq_err[0], odd.nees[1], odd.run_mse[0][0] = np.nan, np.inf, -0.0
+    odd.nis_sum = float("nan")
+    fields = [f.name for f in dataclasses.fields(FilterStats)]
+    for name, s in stats.items():
+        doc = s.to_json()
+        assert list(doc) == fields
+        back = FilterStats.from_json(json.loads(json.dumps(doc)))
+        for f in fields:
+            assert _bits(getattr(back, f)) == _bits(getattr(s, f)), (name, f)
+    with pytest.raises(ValueError, match=r"sums of \(24,\) and \(24,\) steps, K = 23"):
+        FilterStats.from_json({**stats["ukf"].to_json(), "K": 23})

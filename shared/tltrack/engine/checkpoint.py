@@ -10,7 +10,8 @@ the merge's order is the batches' order either way.
 A batch's file is named by a digest of all that determines its statistics on this machine:
 
 - the configurations, all but ``runs`` (so a 1000-run sweep reuses the batches of a 200-run one
-  made with the same batch size), and the bytes of a recorded truth's file;
+  made with the same batch size), and the bytes of a recorded truth's file, which name it instead
+  of its path (the same file copied to another folder or name keeps the batches);
 - the filters and the batch's runs;
 - the code that computes them: the syntax trees of the packages ``models``, ``filters``,
   ``config`` and ``engine`` and of ``declare.py``, without their docstrings (a comment or a
@@ -20,11 +21,29 @@ A batch's file is named by a digest of all that determines its statistics on thi
   ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, ``NPY_DISABLE_CPU_FEATURES``, ``OPENBLAS_CORETYPE``.
 
 Any other change names other files: a stale batch is never read, it is run again. Files are
-written whole or not at all (a temporary file, synced, then renamed), so a process killed
-mid-write leaves nothing half-read; a file that cannot be read is run again, with a warning. A
-folder that cannot be written is refused before any batch runs; a save that fails later (a full
-disk) warns once and the sweep goes on without its checkpoint. The files are pickles: resume only
-from a folder that you wrote.
+written whole or not at all (:func:`~tltrack.engine.checkpoint.write_whole`: a temporary file,
+synced, then renamed), so a process killed mid-write leaves nothing half-read; a file that cannot
+be read is run again, with a warning. A folder that cannot be written is refused before any batch
+runs; a save that fails later (a full disk) warns once and the sweep goes on without its
+checkpoint.
+
+The files it writes in the folder:
+
+- ``batch-<key>.pkl``, one per finished batch, ``key`` the digest of its runs
+  (:meth:`~tltrack.engine.checkpoint.Checkpoint.key`). They are pickles: resume only from a folder
+  that you wrote.
+- ``prefix-<key>-b<batch size>.json``, one per sweep and batch size, ``key`` the digest of the
+  sweep without its run count: the merged statistics of its first full batches, up to the first
+  one not yet finished, rewritten as that prefix grows. A longer sweep goes on from a shorter
+  one's (1000 runs from 200), since their first batches are the same. Plain JSON (Python's
+  floats round-trip through it exactly), small enough to commit: with it alone a sweep resumes
+  after its prefix, bit for bit, when the batch files are gone (another session). It also
+  records the sweep's digest without the environment and the environment it was made in: a
+  prefix of the same sweep made elsewhere (another CPU, other library versions) is read when
+  this machine has none, with a warning (:func:`~tltrack.engine.checkpoint.made_elsewhere`), and
+  the prefixes that continue it keep saying so.
+
+:mod:`tltrack.studies.finished` keeps a whole finished sweep in the same folder, named alike.
 """
 
 from __future__ import annotations
@@ -40,9 +59,9 @@ import pickle
 import platform
 import tempfile
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from tltrack.config import Config
 
@@ -59,6 +78,8 @@ CPU_VARIABLES = (
     "NPY_DISABLE_CPU_FEATURES",
     "OPENBLAS_CORETYPE",
 )
+#: the layout of a prefix file; another is ignored
+PREFIX_FORMAT = 1
 
 
 def _tree(source: bytes) -> str:
@@ -136,6 +157,68 @@ def _truth_digest(cfg: Config) -> str | None:
     return hashlib.sha256(Path(cfg.truth_file).read_bytes()).hexdigest() if cfg.truth_file else None
 
 
+def write_whole(path: Path, write: Callable[[IO[Any]], object], *, binary: bool) -> None:
+    """Write ``path`` whole or not at all: ``write`` fills a temporary file in the same folder
+    (mode 644, binary or UTF-8 text), which is flushed, synced and renamed over ``path``. On any
+    error the temporary file is removed and the error raised: ``path`` is the old file or the new
+    one, never half of it."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=path.suffix)
+    try:
+        with os.fdopen(fd, "wb" if binary else "w", encoding=None if binary else "utf-8") as f:
+            os.fchmod(f.fileno(), 0o644)
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _differences(theirs: Any) -> str:
+    """How the environment ``theirs`` (as :func:`environment` recorded it elsewhere) differs
+    from this one: "cpu, versions differ, features unknown; CPU znver3, here rocketlake"."""
+    theirs = theirs if isinstance(theirs, dict) else {}
+    mine = environment()
+    differ = ", ".join(k for k in mine if k in theirs and theirs[k] != mine[k])
+    unknown = "".join(f", {k} unknown" for k in mine if k not in theirs)
+    return f"{differ} differ{unknown}; CPU {theirs.get('cpu', 'unknown')}, here {mine['cpu']}"
+
+
+def made_elsewhere(
+    folder: Path, pattern: str, key: str, what: str = "this sweep"
+) -> tuple[Path, Any] | None:
+    """The first file of ``folder.glob(pattern)`` (by name) whose JSON records ``made.key ==
+    key`` (a digest without the environment, :meth:`Checkpoint.key`), and its document; or None.
+
+    A file found was made in another environment (else it would have this machine's name): a
+    warning says what differs. Its numbers are the same code's with the same seeds, equal in
+    distribution, but not bit for bit what this machine computes. Files that cannot be read are
+    skipped here: their own sweep warns of them."""
+    for other in sorted(Path(folder).glob(pattern)):
+        try:
+            doc = json.loads(other.read_text(encoding="utf-8"))
+            made = doc["made"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # not this sweep's, or warned of when its own sweep reads it
+        if not isinstance(made, dict) or made.get("key") != key:
+            continue
+        warnings.warn(
+            f"{other.name}: {what}, made in another environment "
+            f"({_differences(made.get('environment'))}): read back, the same code and seeds but "
+            "not bit for bit what this machine computes",
+            stacklevel=3,
+        )
+        return other, doc
+    return None
+
+
+def _full(batches: Sequence[Sequence[int]]) -> int:
+    """How many of ``batches`` (runs in order, cut into batches of the first one's size) are
+    full: all but a short last one."""
+    return len(batches) - (len(batches[-1]) < len(batches[0]))
+
+
 def writable(folder: Path) -> None:
     """Make ``folder`` and write a file in it, or raise :class:`OSError`: a checkpoint that
     cannot be kept is refused before any batch runs, not hours later."""
@@ -146,13 +229,18 @@ def writable(folder: Path) -> None:
 
 
 class Checkpoint:
-    """One sweep's batches in ``folder``: :meth:`load` the ones done, :meth:`save` each new one."""
+    """One sweep's batches in ``folder``: :meth:`load` the ones done, :meth:`save` each new one;
+    :meth:`load_prefix` and :meth:`save_prefix` the merged statistics of its first batches."""
 
     def __init__(self, folder: Path, cfgs: Sequence[Config], names: Sequence[str]) -> None:
         self.folder = Path(folder)
         writable(self.folder)
         what = {
-            "configs": [c.model_dump(mode="json", exclude={"runs"}) for c in cfgs],
+            # a recorded truth by its bytes, not its path: the path digested as None, as it is
+            # for a sweep without a truth file (whose names this keeps)
+            "configs": [
+                {**c.model_dump(mode="json", exclude={"runs"}), "truth_file": None} for c in cfgs
+            ],
             "truth_files": [_truth_digest(c) for c in cfgs],
             "filters": list(names),
             "code": code_digest(),
@@ -160,12 +248,25 @@ class Checkpoint:
             "environment": environment(),
         }
         self._sweep = json.dumps(what, sort_keys=True)
+        del what["environment"]
+        self._anywhere = json.dumps(what, sort_keys=True)
         self._saving = True
+        self._saving_prefix = True  # not over a longer sweep's prefix
+        #: the environments, other than this one, that made batches of the prefix read
+        self._elsewhere: list[Any] = []
+
+    def key(self, runs: Sequence[int], machine: bool = True, also: str = "") -> str:
+        """The 24 hex digits that name ``runs`` of this sweep: with ``machine``, on this machine
+        (its environment is in the digest: a batch file's name), else on any (what a file made
+        elsewhere records to be found). ``also``, when given, is digested after the runs."""
+        what = f"{self._sweep if machine else self._anywhere}|{list(runs)}"
+        if also:
+            what += f"|{also}"
+        return hashlib.sha256(what.encode()).hexdigest()[:24]
 
     def path(self, runs: Sequence[int]) -> Path:
         """The file of the batch of ``runs``."""
-        key = hashlib.sha256(f"{self._sweep}|{list(runs)}".encode()).hexdigest()[:24]
-        return self.folder / f"batch-{key}.pkl"
+        return self.folder / f"batch-{self.key(runs)}.pkl"
 
     def load(self, runs: Sequence[int]) -> Any | None:
         """The batch's statistics, or None when it has not run (or its file cannot be read)."""
@@ -183,24 +284,105 @@ class Checkpoint:
         return stats
 
     def save(self, runs: Sequence[int], stats: Any) -> None:
-        """Write the batch's statistics whole: to a temporary file, synced, then renamed. A
-        failure (a full disk) warns once and stops saving; the sweep's numbers are unaffected."""
+        """Write the batch's statistics whole (:func:`write_whole`). A failure (a full disk)
+        warns once and stops saving; the sweep's numbers are unaffected."""
+        what = (self._sweep, list(runs), stats)
+        self._write(self.path(runs), lambda f: pickle.dump(what, f, pickle.HIGHEST_PROTOCOL), True)
+
+    def prefix_path(self, batch_size: int) -> Path:
+        """The prefix file of this sweep's first batches of ``batch_size`` runs. The run count is
+        not in its name: a 1000-run sweep goes on from a 200-run one's prefix."""
+        key = self.key([], also=f"prefix-b{batch_size}")
+        return self.folder / f"prefix-{key}-b{batch_size}.json"
+
+    def _prefix_key(self, batch_size: int) -> str:
+        """The digest of the prefix without the environment, to be found from elsewhere."""
+        return self.key([], machine=False, also=f"prefix-b{batch_size}")
+
+    def load_prefix(
+        self, batches: Sequence[Sequence[int]], decode: Callable[[Any, int], Any]
+    ) -> tuple[int, Any] | None:
+        """How many of ``batches`` the prefix file holds, and their merged statistics, which
+        ``decode(plain, runs)`` makes of its plain JSON (raising ``ValueError``, ``KeyError`` or
+        ``TypeError`` when they are not those of ``runs`` runs); None when there is none.
+
+        This machine's file is read first, else one of the same sweep made elsewhere, with a
+        warning (:func:`made_elsewhere`). A file that cannot be read or does not fit the sweep
+        warns and is ignored: the batches are read from their files, or run again. A prefix of
+        more runs than this sweep's full batches (a longer sweep's) is neither used nor
+        overwritten."""
+        if not batches:
+            return None
+        bs = len(batches[0])
+        path, key = self.prefix_path(bs), self._prefix_key(bs)
+        doc: Any = None
+        try:
+            if path.exists():
+                doc = json.loads(path.read_text(encoding="utf-8"))
+            else:
+                what = "this sweep's first batches"
+                found = made_elsewhere(self.folder, f"prefix-*-b{bs}.json", key, what)
+                if found is None:
+                    return None
+                path, doc = found
+            if doc["format"] != PREFIX_FORMAT:
+                raise ValueError(f"format {doc['format']}")
+            made = doc["made"]
+            if made["key"] != key:
+                raise ValueError("another sweep's")
+            done = doc["batches"]
+            if not isinstance(done, int) or done < 1:
+                raise ValueError(f"{done!r} batches")
+            if done > _full(batches):
+                self._saving_prefix = False
+                warnings.warn(
+                    f"{path.name}: the first {done * bs} runs of a longer sweep, more than this "
+                    f"one's {_full(batches) * bs} in full batches; neither used nor overwritten",
+                    stacklevel=2,
+                )
+                return None
+            stats = decode(doc["stats"], done * bs)
+            elsewhere = list(made.get("elsewhere", []))
+            if made["environment"] != environment():  # read from another machine's file
+                elsewhere.append(made["environment"])
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
+            warnings.warn(
+                f"{path}: unreadable ({err}); ignored, its batches are read from their files or "
+                "run again",
+                stacklevel=2,
+            )
+            return None
+        if elsewhere and path == self.prefix_path(bs):
+            warnings.warn(
+                f"{path.name}: this sweep's first batches were made in another environment "
+                f"({_differences(elsewhere[0])}): read back, the same code and seeds but not bit "
+                "for bit what this machine computes",
+                stacklevel=2,
+            )
+        self._elsewhere = elsewhere
+        return done, stats
+
+    def save_prefix(self, batches: Sequence[Sequence[int]], done: int, stats: Any) -> None:
+        """Write the merged statistics of the first ``done`` of ``batches``, as plain JSON
+        ``stats``, whole (:func:`write_whole`); a failure warns once and stops saving. A prefix
+        ending in a short last batch is not written: it would fit no longer sweep."""
+        if not self._saving_prefix or done > _full(batches):
+            return
+        bs = len(batches[0])
+        made: dict[str, Any] = {"key": self._prefix_key(bs), "environment": environment()}
+        if self._elsewhere:  # the prefix read was made elsewhere: this one is partly so
+            made["elsewhere"] = self._elsewhere
+        doc = {"format": PREFIX_FORMAT, "made": made, "batches": done, "stats": stats}
+        self._write(self.prefix_path(bs), lambda f: f.write(json.dumps(doc)), False)
+
+    def _write(self, path: Path, write: Callable[[IO[Any]], object], binary: bool) -> None:
+        """:func:`write_whole`, or after a failure a warning, once, and no more saving."""
         if not self._saving:
             return
-        path = self.path(runs)
-        tmp = None
         try:
-            fd, tmp = tempfile.mkstemp(dir=self.folder, prefix=".tmp-", suffix=".pkl")
-            os.fchmod(fd, 0o644)
-            with os.fdopen(fd, "wb") as f:
-                pickle.dump((self._sweep, list(runs), stats), f, pickle.HIGHEST_PROTOCOL)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except (OSError, pickle.PicklingError, TypeError, AttributeError) as err:
-            if tmp:
-                Path(tmp).unlink(missing_ok=True)
+            write_whole(path, write, binary=binary)
+        except (OSError, ValueError, TypeError, AttributeError, pickle.PicklingError) as err:
             self._saving = False
             warnings.warn(
-                f"checkpoint {self.folder}: cannot save ({err}); going on without it", stacklevel=2
+                f"checkpoint {self.folder}: cannot save ({err}); going on without it", stacklevel=3
             )

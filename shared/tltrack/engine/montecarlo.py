@@ -14,12 +14,14 @@ its last ``LOST_STEPS`` steps: it has diverged, not merely ended on one bad step
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -95,6 +97,75 @@ class FilterStats:
         self.windows += other.windows
         self.above_band += other.above_band
         self.below_band += other.below_band
+
+    def to_json(self) -> dict[str, Any]:
+        """Every field as plain JSON, which :meth:`from_json` reads back exactly: arrays as
+        (nested) lists of Python floats, whose :mod:`json` text round-trips them (NaN as NaN)."""
+        doc: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            match f.type:
+                case "int":
+                    doc[f.name] = int(value)
+                case "float":
+                    doc[f.name] = float(value)
+                case "list[float]":
+                    doc[f.name] = [float(v) for v in value]
+                case "Array":
+                    doc[f.name] = _floats(value).tolist()
+                case "list[Array]":
+                    doc[f.name] = [_floats(v).tolist() for v in value]
+                case _:
+                    raise TypeError(f"FilterStats.{f.name}: no JSON for a {f.type}")
+        return doc
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> FilterStats:
+        """The statistics that :meth:`to_json` wrote, bit for bit; ``ValueError``,
+        ``KeyError`` or ``TypeError`` when ``doc`` is not such."""
+        fields = dataclasses.fields(cls)
+        extra = set(doc) - {f.name for f in fields}
+        if extra:
+            raise ValueError(f"FilterStats has no {sorted(extra)}")
+        values: dict[str, Any] = {}
+        for f in fields:
+            value = doc[f.name]
+            match f.type:
+                case "int":
+                    values[f.name] = _exactly(int, value)
+                case "float":
+                    values[f.name] = float(_exactly((int, float), value))
+                case "list[float]":
+                    values[f.name] = [float(_exactly((int, float), v)) for v in value]
+                case "Array":
+                    values[f.name] = _floats(value)
+                case "list[Array]":
+                    values[f.name] = [_floats(v) for v in _exactly(list, value)]
+                case _:
+                    raise TypeError(f"FilterStats.{f.name}: no JSON for a {f.type}")
+        out = cls(**{f.name: values[f.name] for f in fields if f.init})
+        for f in fields:
+            if not f.init:
+                setattr(out, f.name, values[f.name])
+        if out.sq_err.shape != (out.K,) or out.nees.shape != (out.K,):
+            raise ValueError(f"sums of {out.sq_err.shape} and {out.nees.shape} steps, K = {out.K}")
+        return out
+
+
+def _floats(value: Any) -> Array:
+    """``value`` as an array of float64 (NaN where it was NaN), refusing what holds no number."""
+    if isinstance(value, np.ndarray) and value.dtype != np.float64:
+        raise TypeError(f"an array of {value.dtype}, not float64")
+    if not isinstance(value, np.ndarray | list):
+        raise TypeError(f"a {type(value).__name__}, not a list of numbers")
+    return np.asarray(value, dtype=np.float64)
+
+
+def _exactly(kind: type | tuple[type, ...], value: Any) -> Any:
+    """``value``, when it is of ``kind`` (a JSON true is no count)."""
+    if isinstance(value, bool) or not isinstance(value, kind):
+        raise TypeError(f"{value!r} is not a {kind}")
+    return value
 
 
 def expand(names: Sequence[str], cfg: Config) -> list[FilterSpec]:
@@ -452,6 +523,9 @@ def run_sweep(
     it completes; results are merged in batch order, so they do not depend on which finished first.
     With a ``checkpoint`` folder, each finished batch is kept there and a batch found there is
     read instead of run (:mod:`tltrack.engine.checkpoint`): a sweep that was stopped resumes.
+    The merged statistics of the first batches, as far as all have finished, are kept there too,
+    as one small JSON file that is read first: its batches count as merged at once (``progress``
+    hears their runs in one call), and only the later ones are read from their files or run.
     """
     check_sweep(cfgs)
     if executor is not None and workers is not None:
@@ -474,6 +548,23 @@ def run_sweep(
     done: dict[int, list[dict[str, FilterStats]]] = {}
     merged = 0
 
+    def decode(plain: Any, runs: int) -> list[dict[str, FilterStats]]:
+        """A prefix's merged statistics from their JSON, checked to hold ``runs`` runs."""
+        stats = [{n: FilterStats.from_json(s) for n, s in part.items()} for part in plain]
+        if len(stats) != len(cfgs) or not all(stats):
+            raise ValueError(f"{len(stats)} configurations' statistics, not {len(cfgs)}")
+        for part in stats:
+            for name, s in part.items():
+                seen = {sum(len(a) for a in s.run_mse), sum(len(a) for a in s.tail_err)}
+                if seen != {runs}:
+                    raise ValueError(f"{name}: {sorted(seen)} runs, not {runs}")
+        return stats
+
+    if kept and (prefix := kept.load_prefix(batches, decode)):
+        merged, totals = prefix  # batches 0..merged-1, merged in order once for all
+        if progress:
+            progress(sum(len(b) for b in batches[:merged]))
+
     def finished(i: int, stats: list[dict[str, FilterStats]], *, new: bool = True) -> None:
         nonlocal merged
         if kept and new:
@@ -481,12 +572,18 @@ def run_sweep(
         if progress:
             progress(len(batches[i]))
         done[i] = stats
+        before = merged
         while merged in done:  # in batch order: float sums in a fixed order
             absorb(done.pop(merged))
             merged += 1
+        if kept and merged > before:  # the totals serialised now: no copy outlives a merge
+            plain = [{name: s.to_json() for name, s in total.items()} for total in totals]
+            kept.save_prefix(batches, merged, plain)
 
     todo = []  # the batches not read back from the checkpoint
     for i, b in enumerate(batches):
+        if i < merged:
+            continue  # in the prefix
         stats = kept.load(b) if kept else None
         if stats is None:
             todo.append(i)

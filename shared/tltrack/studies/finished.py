@@ -8,36 +8,37 @@ one JSON file (``sweep-<key>.json``, about 250 kB for 6 filters of 1200 steps an
 a later call reads that file instead of the sweep's batches. Copying or committing the
 ``sweep-*.json`` files alone carries every finished sweep; the study then runs only the others.
 
-The file is named by the batch file the whole sweep would have as one batch (the same digest of
-configurations, filters, code and environment, see :mod:`tltrack.engine.checkpoint`), the batch
-size and whether a run was timed: the two that change a result's last bit or its fields. It
-holds plain JSON, no pickle, and Python's floats round-trip through it exactly, so a sweep read
-back on the machine that ran it is bit for bit the sweep that ran. A file that cannot be read, or
-whose content does not fit the sweep, is run again with a warning.
+The file is named by the key the whole sweep would have as one batch
+(:meth:`~tltrack.engine.checkpoint.Checkpoint.key`: the same digest of configurations, filters,
+code and environment as its batch files), the batch size and whether a run was timed: the two
+that change a result's last bit or its fields. It holds plain JSON, no pickle, and Python's
+floats round-trip through it exactly, so a sweep read back on the machine that ran it is bit for
+bit the sweep that ran. A file that cannot be read, or whose content does not fit the sweep, is
+run again with a warning.
 
 A file made on another machine (another CPU, or other versions of the numerical libraries) has
 another name, but it also records the sweep's digest without the environment. When no file of
-this machine's name is there, one of the same sweep made elsewhere is read back, with a warning:
-its runs are the same code's with the same seeds, equal in distribution, but not bit for bit what
-this machine would compute (the manoeuvres study's first 8 sweeps, made on two CPUs, differ by
-at most 1.3e-10 m of run RMSE: ``papers/manoeuvres/other_machine.py``). Delete it to run the
-sweep here instead.
+this machine's name is there, one of the same sweep made elsewhere is read back, with a warning
+(:func:`~tltrack.engine.checkpoint.made_elsewhere`): its runs are the same code's with the same
+seeds, equal in distribution, but not bit for bit what this machine would compute (the
+manoeuvres study's first 8 sweeps, made on two CPUs, differ by at most 1.3e-10 m of run RMSE:
+``papers/manoeuvres/other_machine.py``). Delete it to run the sweep here instead.
+
+A sweep that has not finished carries over by its prefix file instead
+(:mod:`tltrack.engine.checkpoint`): the merged statistics of its first batches.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
-import os
-import tempfile
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from tltrack.config import Config
-from tltrack.engine.checkpoint import Checkpoint, environment
+from tltrack.engine.checkpoint import Checkpoint, environment, made_elsewhere, write_whole
 from tltrack.engine.montecarlo import FilterResult
 
 Results = dict[str, FilterResult]
@@ -59,40 +60,17 @@ class Finished:
         checkpoint = Checkpoint(folder, cfgs, names)
         runs = range(cfgs[0].runs)
         tail = f"-b{batch_size}{'-timed' if timed else ''}"
-        key = checkpoint.path(runs).stem.removeprefix("batch-")
-        self.file = Path(folder) / f"sweep-{key}{tail}.json"
-        # the digest of the file's name without the environment: the batches' own, read whole
-        # so that no field is missed (Checkpoint should say it; its code is in every digest)
-        sweep = json.loads(checkpoint._sweep)
-        del sweep["environment"]
-        what = f"{json.dumps(sweep, sort_keys=True)}|{list(runs)}|{tail}"
-        self.key = hashlib.sha256(what.encode()).hexdigest()[:24]
+        self.file = Path(folder) / f"sweep-{checkpoint.key(runs)}{tail}.json"
+        #: the digest of the file's name without the environment, to be found from elsewhere
+        self.key = checkpoint.key(runs, machine=False, also=tail)
         self.cfgs = cfgs
 
     def load(self) -> list[Results] | None:
         """The sweep's results, or None when it has not finished (or its file does not fit)."""
         if self.file.exists():
             return self._results(self.file)
-        for other in sorted(self.file.parent.glob("sweep-*.json")):
-            try:
-                doc = json.loads(other.read_text(encoding="utf-8"))
-                made = doc["made"]
-            except (OSError, ValueError, KeyError, TypeError):
-                continue  # not this sweep's, or warned of when its own sweep reads it
-            if not isinstance(made, dict) or made.get("key") != self.key:
-                continue
-            theirs, mine = made.get("environment", {}), environment()
-            differ = ", ".join(k for k in mine if k in theirs and theirs[k] != mine[k])
-            unknown = "".join(f", {k} unknown" for k in mine if k not in theirs)
-            cpu = f"CPU {theirs.get('cpu', 'unknown')}, here {mine['cpu']}"
-            warnings.warn(
-                f"{other.name}: this sweep, made in another environment ({differ} differ"
-                f"{unknown}; {cpu}): read back, the same code and seeds but not bit for bit what "
-                "this machine computes",
-                stacklevel=2,
-            )
-            return self._results(other, doc)
-        return None
+        found = made_elsewhere(self.file.parent, "sweep-*.json", self.key)
+        return None if found is None else self._results(*found)
 
     def _results(self, file: Path, doc: Any = None) -> list[Results] | None:
         """The results in ``doc`` (by default ``file``'s JSON), checked against the sweep."""
@@ -121,16 +99,7 @@ class Finished:
             "made": {"key": self.key, "environment": environment()},
             "results": [{n: dataclasses.asdict(r) for n, r in part.items()} for part in results],
         }
-        tmp = None
         try:
-            fd, tmp = tempfile.mkstemp(dir=self.file.parent, prefix=".tmp-", suffix=".json")
-            os.fchmod(fd, 0o644)
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                json.dump(doc, f)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, self.file)
+            write_whole(self.file, lambda f: f.write(json.dumps(doc)), binary=False)
         except OSError as err:
-            if tmp:
-                Path(tmp).unlink(missing_ok=True)
             warnings.warn(f"{self.file}: cannot save the finished sweep ({err})", stacklevel=2)
