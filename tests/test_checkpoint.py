@@ -199,6 +199,11 @@ def test_the_code_digest_follows_code_and_not_docstrings(tmp_path):
     reworded = '"""Reworded."""\n\ndef f(x):\n    """Why not."""\n    return 2 * x  # !\n'
     assert digest(reworded) == base
     assert digest('"""A module."""\n\ndef f(x):\n    """Why."""\n    return 3 * x\n') != base
+    (tmp_path / "engine").mkdir()
+    (tmp_path / "engine" / "plots.py").write_text("def g():\n    return 1\n")
+    assert digest(reworded) == base  # a module beside the numbers: its edits keep the files
+    (tmp_path / "engine" / "montecarlo.py").write_text("def g():\n    return 1\n")
+    assert digest(reworded) != base
     code_digest.cache_clear()
     with pytest.raises(RuntimeError, match="no source"):
         code_digest(tmp_path / "elsewhere")

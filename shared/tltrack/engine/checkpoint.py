@@ -15,7 +15,9 @@ A batch's file is named by a digest of all that determines its statistics on thi
 - the filters and the batch's runs;
 - the code that computes them: the syntax trees of the packages ``models``, ``filters``,
   ``config`` and ``engine`` and of ``declare.py``, without their docstrings (a comment or a
-  docstring edited keeps the batches), and the source of any plugin kind that is registered;
+  docstring edited keeps the batches), but for the modules that compute none of a batch's numbers
+  (:data:`BESIDE`: this one, the Dask pool's, its workers' preload and the plots), and the source
+  of any plugin kind that is registered;
 - the environment that can change the last bit (see :doc:`/howto/dask`): the versions of Python,
   NumPy, SciPy, numba and llvmlite, the CPU that numba compiles for and its features, and
   ``NUMBA_CPU_NAME``, ``NUMBA_CPU_FEATURES``, ``NPY_DISABLE_CPU_FEATURES``, ``OPENBLAS_CORETYPE``.
@@ -71,6 +73,9 @@ PACKAGE = Path(__file__).resolve().parents[1]
 NUMERICAL = ("models", "filters", "config", "engine")
 #: the declarations that they build on (parameters, registries)
 DECLARE = "declare.py"
+#: modules of those packages that store, distribute or draw results and compute none of a
+#: batch's numbers: an edit to them keeps every file (a table of many sessions outlives edits)
+BESIDE = ("engine/checkpoint.py", "engine/cluster.py", "engine/dask_preload.py", "engine/plots.py")
 #: environment variables that change which machine code numba and NumPy run
 CPU_VARIABLES = (
     "NUMBA_CPU_NAME",
@@ -101,10 +106,11 @@ def _tree(source: bytes) -> str:
 @functools.cache
 def code_digest(root: Path = PACKAGE) -> str:
     """A digest of the numerical packages' code (:data:`NUMERICAL`, :data:`DECLARE`) under
-    ``root``."""
+    ``root``, but for the modules :data:`BESIDE` them."""
     paths = [root / DECLARE] + [p for pkg in NUMERICAL for p in sorted((root / pkg).rglob("*.py"))]
     # an editor's lock file (.#x.py) is no source; nor is a declare.py that is not there
     paths = [p for p in paths if not p.name.startswith(".") and p.is_file()]
+    paths = [p for p in paths if p.relative_to(root).as_posix() not in BESIDE]
     h = hashlib.sha256()
     for path in paths:
         h.update(path.relative_to(root).as_posix().encode())
