@@ -1,7 +1,7 @@
 """Take the per-run arrays (``run_rmse``) out of results files, so that the summaries can be
-committed: each FILE (or every ``*.json`` under a DIR) that holds a ``run_rmse`` keeps everything
-else, and the untouched original goes to ``<name>.full.json`` beside it, which git ignores
-(papers/.gitignore). ``scripts/long_runs.sh`` runs it after every job.
+committed: each FILE (or every ``*.json`` under a DIR, but for a checkpoint folder's, which the
+engine reads back whole) that holds a ``run_rmse`` keeps everything else, and the untouched
+original goes to ``<name>.full.json`` beside it, which git ignores (papers/.gitignore). ``scripts/long_runs.sh`` runs it after every job.
 
     .venv/bin/python papers/strip_runs.py papers/rpf/results/presets [FILE_OR_DIR ...]
 
@@ -52,7 +52,8 @@ def main(args: list[str]) -> None:
         return
     for arg in map(Path, args):
         files = sorted(arg.rglob("*.json")) if arg.is_dir() else [arg]
-        for f in files:
+        # a checkpoint's sweep files are read back by the engine, run_rmse and all
+        for f in (f for f in files if "checkpoint" not in f.parts):
             if not f.name.endswith(".full.json") and strip(f):
                 print(f"stripped {f} (original: {f.stem}.full.json)")
 
