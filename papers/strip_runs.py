@@ -1,7 +1,8 @@
 """Take the per-run arrays (``run_rmse``) out of results files, so that the summaries can be
 committed: each FILE (or every ``*.json`` under a DIR, but for a checkpoint folder's, which the
 engine reads back whole) that holds a ``run_rmse`` keeps everything else, and the untouched
-original goes to ``<name>.full.json`` beside it, which git ignores (papers/.gitignore). ``scripts/long_runs.sh`` runs it after every job.
+original goes to ``<name>.full.json`` beside it, which git ignores (papers/.gitignore).
+``scripts/long_runs.sh`` runs it after every job.
 
     .venv/bin/python papers/strip_runs.py papers/rpf/results/presets [FILE_OR_DIR ...]
 
