@@ -7,6 +7,9 @@ Each sweep is found by the digest it records without the environment (``made.key
 :mod:`tltrack.studies.finished`); the output is the largest difference of run RMSE over the
 filters and runs compared, in metres. A batch's last bits depend on its size, so this also
 counts the difference between a batch of ``--runs`` here and the file's batches of 22.
+
+The digest holds the numerical code: run it with the code that made the sweeps (commit 3098c15,
+``PYTHONPATH=<its checkout>/shared``), or it finds none of them.
 """
 
 from __future__ import annotations
