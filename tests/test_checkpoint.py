@@ -73,6 +73,15 @@ def _drop(folder, pattern):
         file.unlink()
 
 
+def _as_another_cpus(file, kind):
+    """Make ``file`` (a ``kind`` file, sweep or prefix, of batches of 3) one that another CPU
+    wrote: its recorded CPU, and its name, which differs as its digest does."""
+    doc = json.loads(file.read_text())
+    doc["made"]["environment"]["cpu"] = "another-cpu"
+    file.unlink()
+    (file.parent / f"{kind}-000000000000000000000000-b3.json").write_text(json.dumps(doc))
+
+
 def _prefix(folder):
     """The prefix file in ``folder`` and its document."""
     (file,) = folder.glob("prefix-*.json")
@@ -263,10 +272,7 @@ def test_a_finished_sweep_is_read_back_whole_from_its_file_alone(tmp_path, batch
 
 def test_a_sweep_finished_on_another_machine_is_read_back_with_a_warning(tmp_path, batches_run):
     whole, kept = _sweep_file_alone(tmp_path)
-    doc = json.loads(kept.read_text())
-    doc["made"]["environment"]["cpu"] = "another-cpu"  # its name differs as its digest does
-    kept.unlink()
-    (tmp_path / "sweep-000000000000000000000000-b3.json").write_text(json.dumps(doc))
+    _as_another_cpus(kept, "sweep")
     batches_run.clear()
     with pytest.warns(UserWarning, match=r"another environment \(cpu differ; CPU another-cpu"):
         _same(_study_sweep(tmp_path), whole)
@@ -359,11 +365,7 @@ def test_a_longer_sweep_goes_on_from_a_shorter_ones_prefix(tmp_path, batches_run
 def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batches_run):
     cfgs = _cfgs()
     whole = _sweep(cfgs)
-    file = _prefix_alone(tmp_path, cfgs)
-    doc = json.loads(file.read_text())
-    doc["made"]["environment"]["cpu"] = "another-cpu"  # its name differs as its digest does
-    file.unlink()
-    (tmp_path / "prefix-000000000000000000000000-b3.json").write_text(json.dumps(doc))
+    _as_another_cpus(_prefix_alone(tmp_path, cfgs), "prefix")
     batches_run.clear()
     with pytest.warns(UserWarning, match=r"another environment \(cpu differ; CPU another-cpu"):
         _same(_sweep(cfgs, tmp_path), whole)

@@ -78,17 +78,17 @@ def _run(
     Pi = np.asarray(setup.cfg.mode_transition)
     modes: dict[str, list[np.ndarray]] = {}
     errors: dict[str, list[np.ndarray]] = {}
+    truth = np.stack([s.truth[:, [0, 2]] for s in sims], axis=1)  # (ticks + 1, B, 2): positions
 
     def collect(r: StepRecord) -> None:
         p = r.filter.mode_probabilities  # type: ignore[attr-defined]
         # a source has predicted already (its transfer is for k + 1); a primary holds mu_k
         modes.setdefault(r.name, []).append(p.copy() if r.role == "source" else Pi.T @ p)
-        truth = np.stack([s.truth[r.k] for s in sims])
-        d = r.estimate.mean[:, [0, 2]] - truth[:, [0, 2]]
+        d = r.estimate.mean[:, [0, 2]] - truth[r.k]
         errors.setdefault(r.name, []).append(np.hypot(d[:, 0], d[:, 1]))
         if adopt and r.name in ("ukf", "tl-ukf"):
-            mu = np.linalg.solve(Pi.T, modes["source-ukf"][-1])
-            r.filter.mu = np.clip(mu, 0.0, None) / np.clip(mu, 0.0, None).sum(axis=0)  # type: ignore[attr-defined]
+            mu = np.clip(np.linalg.solve(Pi.T, modes["source-ukf"][-1]), 0.0, None)
+            r.filter.mu = mu / mu.sum(axis=0)  # type: ignore[attr-defined]
 
     x0 = np.stack([s.x0_hat for s in sims], axis=1)
     driver = Driver([setup], ["ukf", "tl-ukf", "rpf", "tl-rpf"], x0, [s.run for s in sims],
