@@ -3,15 +3,15 @@
 from __future__ import annotations
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
-from tltrack.wire.transport import ZenohSettings
+from pydantic_settings import SettingsConfigDict
+from tltrack.live.service import ServiceSettings
 
 NAME = "dashboard"
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8050
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Loopback by default: the page shows referee data, so exposing it is an explicit choice
     (``TLTRACK_DASHBOARD_HOST=0.0.0.0`` in a container, behind a published port)."""
 
@@ -26,5 +26,3 @@ class Settings(BaseSettings):
     max_steps: int = Field(20_000, ge=1, le=1_000_000, description="steps kept per series")
     max_filters: int = Field(8, ge=1, le=64, description="estimate streams kept per episode")
     max_points: int = Field(2_000, ge=10, le=100_000, description="points per series sent")
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)

@@ -20,7 +20,7 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 from tltrack.config import PRIMARY, Config, FilterKindName
 from tltrack.config.timeline import US
 from tltrack.filters.decision import NotComparableError
@@ -28,18 +28,18 @@ from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.heartbeat import LinkWatch
-from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.live.tracking import PrimaryEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule, Transfer
-from tltrack.wire.transport import Received, ZenohSettings, decode_received
+from tltrack.wire.transport import Received, decode_received
 
 log = logging.getLogger("primary_tracker")
 NAME = "primary_tracker"
 SOURCE_TRACKER = "source_tracker"
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Environment ``TLTRACK_PRIMARY_<FIELD>`` or ``--<field>``."""
 
     model_config = SettingsConfigDict(
@@ -74,8 +74,6 @@ class Settings(BaseSettings):
     )
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
     max_episodes: int = Field(4, ge=1)
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
 
 @dataclass

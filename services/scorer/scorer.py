@@ -22,22 +22,22 @@ from collections import defaultdict
 from pathlib import Path
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 from tltrack.config import PRIMARY
 from tltrack.live.held import Held
-from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.live.summary import print_summary
 from tltrack.services.scorer.store import Store
 from tltrack.services.scorer.summary import Summarizer
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
-from tltrack.wire.transport import Queryable, Received, ZenohSettings, decode_received
+from tltrack.wire.transport import Queryable, Received, decode_received
 
 log = logging.getLogger("scorer")
 NAME = "scorer"
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Environment ``TLTRACK_SCORER_<FIELD>`` or ``--<field>``."""
 
     model_config = SettingsConfigDict(
@@ -46,8 +46,6 @@ class Settings(BaseSettings):
 
     db: Path = Field(Path("tltrack-scorer.sqlite"), description="SQLite file")
     grace_s: float = Field(5.0, gt=0, description="wait for late estimates after an episode")
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
 
 class Scorer:

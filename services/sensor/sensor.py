@@ -18,23 +18,23 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config
 from tltrack.config.timeline import Timeline
 from tltrack.engine.scenario import reports, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
 from tltrack.live.episodes import Episodes
-from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Tick
-from tltrack.wire.transport import Received, ZenohSettings, decode_received
+from tltrack.wire.transport import Received, decode_received
 
 log = logging.getLogger("sensor")
 NAME = "sensor"
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Environment ``TLTRACK_SENSOR_<FIELD>`` or ``--<field>``."""
 
     model_config = SettingsConfigDict(
@@ -46,8 +46,6 @@ class Settings(BaseSettings):
     )
     max_episodes: int = Field(4, ge=1, description="episodes measured at once")
     replay_csv: Path | None = Field(None, description="replay this sensor's recorded rows")
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
 
 def operator(sensor: str) -> str:

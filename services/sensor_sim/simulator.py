@@ -21,22 +21,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config, load_config
 from tltrack.engine.scenario import Run, simulate
 from tltrack.engine.scene import primary_scan
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.live import replay
-from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
-from tltrack.wire.transport import LivelinessWatcher, Queryable, ZenohSettings
+from tltrack.wire.transport import LivelinessWatcher, Queryable
 
 log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Environment ``TLTRACK_SIM_<FIELD>`` or ``--<field>``."""
 
     model_config = SettingsConfigDict(
@@ -75,8 +75,6 @@ class Settings(BaseSettings):
     )
     wait_timeout_s: float = Field(60.0, gt=0)
     linger_s: float = Field(1.0, ge=0, description="wait before closing, so the link drains")
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
     def load_config(self) -> Config:
         over: dict[str, Any] = {

@@ -12,23 +12,23 @@ from dataclasses import dataclass, field
 from functools import partial
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config, FilterKindName
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.episodes import StepQueue, TrackedEpisodes
 from tltrack.live.heartbeat import HeartbeatSender
-from tltrack.live.service import Service, load_settings, setup_logging
+from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.live.tracking import SourceEpisode, StepReport
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import EpisodeStart, Measurement, Schedule
-from tltrack.wire.transport import Received, ZenohSettings, decode_received
+from tltrack.wire.transport import Received, decode_received
 
 log = logging.getLogger("source_tracker")
 NAME = "source_tracker"
 
 
-class Settings(BaseSettings):
+class Settings(ServiceSettings):
     """Environment ``TLTRACK_SOURCE_<FIELD>`` or ``--<field>``."""
 
     model_config = SettingsConfigDict(
@@ -43,8 +43,6 @@ class Settings(BaseSettings):
     heartbeat_s: float = Field(
         0.1, gt=0, le=10, description="heartbeat period on the direct link to the primary"
     )
-    log_level: str = "INFO"
-    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
 
 
 @dataclass

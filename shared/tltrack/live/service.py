@@ -19,10 +19,10 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from types import FrameType
-from typing import Any, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
 import zenoh
-from pydantic import ValidationError
+from pydantic import BeforeValidator, Field, ValidationError
 from pydantic_settings import BaseSettings
 from tltrack.config import describe_validation_error, plugins
 from tltrack.live.supervisor import exit_unless_stopped
@@ -39,6 +39,22 @@ from tltrack.wire.transport import (
 )
 
 log = logging.getLogger(__name__)
+
+LogLevel = Annotated[
+    Literal["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"],
+    BeforeValidator(lambda v: v.upper() if isinstance(v, str) else v),
+]
+
+
+class ServiceSettings(BaseSettings):
+    """The settings every service has beside its own; each subclass sets its environment prefix.
+
+    The level is checked here, so a misspelt one is refused with the field named instead of
+    failing inside :mod:`logging` after start."""
+
+    log_level: LogLevel = Field("INFO", description="least severe level logged (any case)")
+    zenoh: ZenohSettings = Field(default_factory=ZenohSettings)
+
 
 S = TypeVar("S", bound=BaseSettings)
 
@@ -61,9 +77,9 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
         raise SystemExit(2) from None
 
 
-def setup_logging(level: str = "INFO") -> None:
+def setup_logging(level: LogLevel = "INFO") -> None:
     logging.basicConfig(
-        level=level.upper(),
+        level=level,
         stream=sys.stderr,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )

@@ -31,11 +31,6 @@ from tltrack.models.scan import Statement
 from tltrack.wire.messages import EstimateMsg, Measurement, Schedule, Transfer
 
 
-def _start(cfg: Config, run: int) -> tuple[Setup, Array]:
-    """The episode's models and run ``run``'s x0_hat (n_x, 1): as the engine starts that run."""
-    return Setup(cfg), initial_estimate(cfg, run)[:, None]
-
-
 def transfer(msg: Transfer, source_id: str, layout: Layout) -> Observation:
     """N(eta_hat_k; h_source(x_k), P_eta_eta,k): the source's statement about its own sensor,
     which the transfer itself describes."""
@@ -140,29 +135,19 @@ class StepReport:
         svc.count("recoveries" if self.recovered else "steps_on_track")
 
 
-class SourceEpisode:
-    """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1).
+class _Operator:
+    """What either half of an episode knows of itself: the episode's models, its own sensor (what
+    its measurement messages must hold) and the NIS monitor of its filter."""
 
-    The step driver's source half (:class:`~tltrack.engine.driver.Sources`) with one filter.
-    """
-
-    def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
-        self.cfg, self.source_id = cfg, source_id
-        setup, x0_hat = _start(cfg, run)
+    def _start(self, cfg: Config, run: int, sensor: str) -> tuple[Setup, Array]:
+        """The episode's models and run ``run``'s x0_hat (n_x, 1), as the engine starts that run."""
+        self.cfg = cfg
+        setup = Setup(cfg)
         self.timeline = setup.timeline
         self.layout = setup.layout
-        self.own = setup.sensors[source_id]
-        spec = parse(f"source-{kind}")
-        self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
-        self._link: Link = (spec.name, source_id)
-        self._estimates: dict[str, Estimate] = {}
+        self.own: OwnSensor = setup.sensors[sensor]
         self.monitor = NisMonitor(self.own.model.n_z)
-        self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep, self.monitor])
-        self.k = 0
-        self._view: Timeline | None = None  #: its timeline with the primary's published schedule
-
-    def _keep(self, record: StepRecord) -> None:
-        self._estimates[record.name] = record.estimate
+        return setup, initial_estimate(cfg, run)[:, None]
 
     @property
     def n_z(self) -> int:
@@ -175,6 +160,27 @@ class SourceEpisode:
     @property
     def one_detection(self) -> bool:
         return self.own.detection.trivial
+
+
+class SourceEpisode(_Operator):
+    """Algorithm 1 for one episode: ``step(z_k)`` -> (estimate at k, (eta, P) for k + 1).
+
+    The step driver's source half (:class:`~tltrack.engine.driver.Sources`) with one filter.
+    """
+
+    def __init__(self, cfg: Config, run: int, kind: str, source_id: str) -> None:
+        self.source_id = source_id
+        setup, x0_hat = self._start(cfg, run, source_id)
+        spec = parse(f"source-{kind}")
+        self.name = reported_name(spec, source_id, len(cfg.sources))  # as the engine reports it
+        self._link: Link = (spec.name, source_id)
+        self._estimates: dict[str, Estimate] = {}
+        self._half = Sources(setup, [self._link], x0_hat, [run], [self._keep, self.monitor])
+        self.k = 0
+        self._view: Timeline | None = None  #: its timeline with the primary's published schedule
+
+    def _keep(self, record: StepRecord) -> None:
+        self._estimates[record.name] = record.estimate
 
     def step(self, z: Measurement | None) -> tuple[Estimate, Observation]:
         """``None``: the measurement of this step never came; predict through it."""
@@ -238,7 +244,7 @@ class SourceEpisode:
         return self._half.recovered(self._link)
 
 
-class PrimaryEpisode:
+class PrimaryEpisode(_Operator):
     """Algorithm 2 for one episode, with an isolated twin run alongside for comparison.
 
     The step driver's primary half (:class:`~tltrack.engine.driver.Primaries`) with two filters:
@@ -248,16 +254,11 @@ class PrimaryEpisode:
     """
 
     def __init__(self, cfg: Config, run: int, kind: str, robust: bool = False) -> None:
-        self.cfg = cfg
-        setup, x0_hat = _start(cfg, run)
-        self.timeline = setup.timeline
-        self.layout = setup.layout
-        self.own = setup.sensors[PRIMARY]
+        setup, x0_hat = self._start(cfg, run, PRIMARY)
         self.tl_name, self.iso_name = f"{'robust-' if robust else ''}tl-{kind}", kind
         if robust:
             check_filters(cfg, [self.tl_name])
         specs = [parse(self.tl_name), parse(self.iso_name)]
-        self.monitor = NisMonitor(self.own.model.n_z)
         self._half = Primaries(setup, specs, x0_hat, [run], [self.monitor], share_twins=True)
         self._k = {self.tl_name: 0, self.iso_name: 0}
 
@@ -298,18 +299,6 @@ class PrimaryEpisode:
         :meth:`step`.
         """
         return self._step(self.iso_name, z, [])
-
-    @property
-    def n_z(self) -> int:
-        return self.own.model.n_z
-
-    @property
-    def components(self) -> tuple[str, ...]:
-        return tuple(self.own.model.components)
-
-    @property
-    def one_detection(self) -> bool:
-        return self.own.detection.trivial
 
     @property
     def names(self) -> tuple[str, str]:

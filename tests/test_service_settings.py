@@ -1,0 +1,45 @@
+"""Every service's settings share one base (:class:`tltrack.live.service.ServiceSettings`): a
+misspelt log level is refused at start with the field named, from a flag or the environment,
+where it used to pass and then crash :mod:`logging` with a traceback."""
+
+import importlib
+
+import pytest
+from tltrack.live.service import ServiceSettings, load_settings
+
+pytestmark = pytest.mark.unit
+
+SERVICES = {  # the module of each service's Settings: its environment prefix
+    "tltrack.services.sensor.sensor": "TLTRACK_SENSOR_",
+    "tltrack.services.sensor_sim.simulator": "TLTRACK_SIM_",
+    "tltrack.services.scorer.scorer": "TLTRACK_SCORER_",
+    "tltrack.services.dashboard.settings": "TLTRACK_DASHBOARD_",
+    "tltrack.services.source_tracker.tracker": "TLTRACK_SOURCE_",
+    "tltrack.services.primary_tracker.tracker": "TLTRACK_PRIMARY_",
+}
+
+
+def _settings(module: str) -> type[ServiceSettings]:
+    cls = importlib.import_module(module).Settings
+    assert issubclass(cls, ServiceSettings)
+    return cls
+
+
+@pytest.mark.parametrize("module", SERVICES)
+def test_a_log_level_is_taken_in_any_case(module: str) -> None:
+    assert load_settings(_settings(module), ["--log_level=debug"]).log_level == "DEBUG"
+
+
+@pytest.mark.parametrize("module", SERVICES)
+def test_a_misspelt_log_level_stops_the_service_naming_the_field(
+    module: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cls = _settings(module)
+    with pytest.raises(SystemExit) as flag:
+        load_settings(cls, ["--log_level=LOUD"])
+    monkeypatch.setenv(f"{SERVICES[module]}LOG_LEVEL", "verbose")
+    with pytest.raises(SystemExit) as env:
+        load_settings(cls, [])
+    assert flag.value.code == env.value.code == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and all("log_level" in line and "'INFO'" in line for line in err), err
