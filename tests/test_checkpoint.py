@@ -379,6 +379,28 @@ def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batch
     assert batches_run[2:] == [[0, 1, 2], [3, 4, 5]]
 
 
+def test_of_one_prefix_per_machine_the_longest_is_read(tmp_path, batches_run):
+    """A sweep carried from machine to machine leaves a prefix file on each: the next goes on
+    from the one that got furthest, whatever the files' names, this machine's own included."""
+    cfgs = _cfgs(runs=10)  # batches of 3, 3, 3 and 1
+    whole = _sweep(cfgs)
+    own = _prefix_alone(tmp_path / "one", cfgs)  # the first batch, in this machine's file
+    _sweep(_cfgs(runs=6), tmp_path / "two")  # the first two
+    for name, made_of, cpu in [
+        (own.name, own, None),
+        ("prefix-000000000000000000000000-b3.json", _prefix(tmp_path / "two")[0], "cpu-a"),
+        ("prefix-fff000000000000000000000-b3.json", own, "cpu-b"),
+    ]:
+        doc = json.loads(made_of.read_text())
+        if cpu:
+            doc["made"]["environment"]["cpu"] = cpu
+        (tmp_path / name).write_text(json.dumps(doc))
+    batches_run.clear()
+    with pytest.warns(UserWarning, match=r"prefix-0{24}-b3.json: this sweep's first .*CPU cpu-a"):
+        _same(_sweep(cfgs, tmp_path), whole)
+    assert batches_run == [[6, 7, 8], [9]]
+
+
 @pytest.mark.parametrize("damage", ["cut short", "a run short"])
 def test_a_damaged_prefix_file_is_ignored_with_a_warning(tmp_path, batches_run, damage):
     cfgs = _cfgs()

@@ -41,9 +41,9 @@ The files it writes in the folder:
   floats round-trip through it exactly), small enough to commit: with it alone a sweep resumes
   after its prefix, bit for bit, when the batch files are gone (another session). It also
   records the sweep's digest without the environment and the environment it was made in: a
-  prefix of the same sweep made elsewhere (another CPU, other library versions) is read when
-  this machine has none, with a warning (:func:`~tltrack.engine.checkpoint.made_elsewhere`), and
-  the prefixes that continue it keep saying so.
+  prefix of the same sweep made elsewhere (another CPU, other library versions) is read, with a
+  warning, when it holds more batches than this machine's (a sweep carried across machines
+  leaves one file per machine), and the prefixes that continue it keep saying so.
 
 :mod:`tltrack.studies.finished` keeps a whole finished sweep in the same folder, named alike.
 """
@@ -191,32 +191,45 @@ def _differences(theirs: Any) -> str:
     return f"{differ} differ{unknown}; CPU {theirs.get('cpu', 'unknown')}, here {mine['cpu']}"
 
 
-def made_elsewhere(
-    folder: Path, pattern: str, key: str, what: str = "this sweep"
-) -> tuple[Path, Any] | None:
-    """The first file of ``folder.glob(pattern)`` (by name) whose JSON records ``made.key ==
-    key`` (a digest without the environment, :meth:`Checkpoint.key`), and its document; or None.
-
-    A file found was made in another environment (else it would have this machine's name): a
-    warning says what differs. Its numbers are the same code's with the same seeds, equal in
-    distribution, but not bit for bit what this machine computes. Files that cannot be read are
-    skipped here: their own sweep warns of them."""
+def _same_sweep(folder: Path, pattern: str, key: str) -> list[tuple[Path, Any]]:
+    """Every file of ``folder.glob(pattern)`` (by name) whose JSON records ``made.key == key`` (a
+    digest without the environment, :meth:`Checkpoint.key`), with its document. Files that cannot
+    be read are skipped here: their own sweep warns of them."""
+    found = []
     for other in sorted(Path(folder).glob(pattern)):
         try:
             doc = json.loads(other.read_text(encoding="utf-8"))
             made = doc["made"]
         except (OSError, ValueError, KeyError, TypeError):
             continue  # not this sweep's, or warned of when its own sweep reads it
-        if not isinstance(made, dict) or made.get("key") != key:
-            continue
-        warnings.warn(
-            f"{other.name}: {what}, made in another environment "
-            f"({_differences(made.get('environment'))}): read back, the same code and seeds but "
-            "not bit for bit what this machine computes",
-            stacklevel=3,
-        )
-        return other, doc
-    return None
+        if isinstance(made, dict) and made.get("key") == key:
+            found.append((other, doc))
+    return found
+
+
+def _warn_elsewhere(path: Path, made: Any, what: str, stacklevel: int = 4) -> None:
+    """A file of this sweep made in another environment is read: say what differs. Its numbers
+    are the same code's with the same seeds, equal in distribution, but not bit for bit what this
+    machine computes."""
+    warnings.warn(
+        f"{path.name}: {what}, made in another environment "
+        f"({_differences(made.get('environment'))}): read back, the same code and seeds but "
+        "not bit for bit what this machine computes",
+        stacklevel=stacklevel,
+    )
+
+
+def made_elsewhere(
+    folder: Path, pattern: str, key: str, what: str = "this sweep"
+) -> tuple[Path, Any] | None:
+    """The first file of ``folder.glob(pattern)`` (by name) of this sweep (:func:`_same_sweep`)
+    and its document, read with a warning (it was made in another environment, else it would
+    have this machine's name); or None."""
+    found = _same_sweep(folder, pattern, key)
+    if not found:
+        return None
+    _warn_elsewhere(found[0][0], found[0][1]["made"], what)
+    return found[0]
 
 
 def _full(batches: Sequence[Sequence[int]]) -> int:
@@ -308,57 +321,67 @@ class Checkpoint:
     def load_prefix(
         self, batches: Sequence[Sequence[int]], decode: Callable[[Any, int], Any]
     ) -> tuple[int, Any] | None:
-        """How many of ``batches`` the prefix file holds, and their merged statistics, which
+        """How many of ``batches`` the prefix read holds, and their merged statistics, which
         ``decode(plain, runs)`` makes of its plain JSON (raising ``ValueError``, ``KeyError`` or
         ``TypeError`` when they are not those of ``runs`` runs); None when there is none.
 
-        This machine's file is read first, else one of the same sweep made elsewhere, with a
-        warning (:func:`made_elsewhere`). A file that cannot be read or does not fit the sweep
-        warns and is ignored: the batches are read from their files, or run again. A prefix of
-        more runs than this sweep's full batches (a longer sweep's) is neither used nor
+        A sweep carried across machines leaves one prefix file per machine, so the one that holds
+        the most batches is read: this machine's file, or one of the same sweep made elsewhere,
+        with a warning that says what differs. A file that cannot be read or does not fit the
+        sweep warns and is ignored: the batches are read from their files, or run again. A prefix
+        of more runs than this sweep's full batches (a longer sweep's) is neither used nor
         overwritten."""
         if not batches:
             return None
-        bs = len(batches[0])
-        path, key = self.prefix_path(bs), self._prefix_key(bs)
-        doc: Any = None
-        try:
-            if path.exists():
-                doc = json.loads(path.read_text(encoding="utf-8"))
-            else:
-                what = "this sweep's first batches"
-                found = made_elsewhere(self.folder, f"prefix-*-b{bs}.json", key, what)
-                if found is None:
-                    return None
-                path, doc = found
-            if doc["format"] != PREFIX_FORMAT:
-                raise ValueError(f"format {doc['format']}")
-            made = doc["made"]
-            if made["key"] != key:
-                raise ValueError("another sweep's")
-            done = doc["batches"]
-            if not isinstance(done, int) or done < 1:
-                raise ValueError(f"{done!r} batches")
-            if done > _full(batches):
+        bs, full = len(batches[0]), _full(batches)
+        own, key = self.prefix_path(bs), self._prefix_key(bs)
+        candidates: list[tuple[Path, Any]] = []
+        if own.exists():
+            try:
+                candidates.append((own, json.loads(own.read_text(encoding="utf-8"))))
+            except (OSError, ValueError) as err:
+                self._unreadable(own, err)
+        candidates += [
+            c for c in _same_sweep(self.folder, f"prefix-*-b{bs}.json", key) if c[0] != own
+        ]
+        usable: list[tuple[int, Path, Any]] = []  # (batches, file, document)
+        for path, doc in candidates:
+            try:
+                if doc["format"] != PREFIX_FORMAT:
+                    raise ValueError(f"format {doc['format']}")
+                if doc["made"]["key"] != key:
+                    raise ValueError("another sweep's")
+                done = doc["batches"]
+                if not isinstance(done, int) or done < 1:
+                    raise ValueError(f"{done!r} batches")
+            except (ValueError, KeyError, TypeError) as err:
+                self._unreadable(path, err)
+                continue
+            if done <= full:
+                usable.append((done, path, doc))
+                continue
+            if path == own:
                 self._saving_prefix = False
-                warnings.warn(
-                    f"{path.name}: the first {done * bs} runs of a longer sweep, more than this "
-                    f"one's {_full(batches) * bs} in full batches; neither used nor overwritten",
-                    stacklevel=2,
-                )
-                return None
-            stats = decode(doc["stats"], done * bs)
-            elsewhere = list(made.get("elsewhere", []))
-            if made["environment"] != environment():  # read from another machine's file
-                elsewhere.append(made["environment"])
-        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
             warnings.warn(
-                f"{path}: unreadable ({err}); ignored, its batches are read from their files or "
-                "run again",
+                f"{path.name}: the first {done * bs} runs of a longer sweep, more than this "
+                f"one's {full * bs} in full batches; neither used nor overwritten",
                 stacklevel=2,
             )
+        if not usable:
             return None
-        if elsewhere and path == self.prefix_path(bs):
+        done, path, doc = max(usable, key=lambda u: u[0])  # the first of the longest: own first
+        made = doc["made"]
+        try:
+            stats = decode(doc["stats"], done * bs)
+            elsewhere = list(made.get("elsewhere", []))
+        except (ValueError, KeyError, TypeError, IndexError, AttributeError) as err:
+            self._unreadable(path, err)
+            return None
+        if path != own:
+            _warn_elsewhere(path, made, "this sweep's first batches", stacklevel=3)
+        if made["environment"] != environment():  # read from another machine's file
+            elsewhere.append(made["environment"])
+        if elsewhere and path == own:
             warnings.warn(
                 f"{path.name}: this sweep's first batches were made in another environment "
                 f"({_differences(elsewhere[0])}): read back, the same code and seeds but not bit "
@@ -367,6 +390,13 @@ class Checkpoint:
             )
         self._elsewhere = elsewhere
         return done, stats
+
+    def _unreadable(self, path: Path, err: Exception) -> None:
+        warnings.warn(
+            f"{path}: unreadable ({err}); ignored, its batches are read from their files or run "
+            "again",
+            stacklevel=3,
+        )
 
     def save_prefix(self, batches: Sequence[Sequence[int]], done: int, stats: Any) -> None:
         """Write the merged statistics of the first ``done`` of ``batches``, as plain JSON
