@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
+from tltrack.engine.registry import parse
 from tltrack.engine.scenario import simulate, truth
 from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.filters import chi2
@@ -208,30 +209,30 @@ def plot(
     path: Path,
 ) -> Path:
     """Lost share against clutter per gate (log x; the zero density drawn at half the first
-    positive one), one line per filter, one panel per pd."""
+    positive one), one line per filter, one panel per pd. Each filter has a colour of its own
+    (four of them are particle filters) and its role's line style; the particle filters have
+    round markers, the others square."""
     from tltrack.engine.plots import _style
 
     positive = [d for d in densities if d > 0]
     zero_at = min(positive) / 2 if positive else 1.0
     xs = [d if d > 0 else zero_at for d in densities]
-    fig, axes = plt.subplots(1, len(lost), figsize=(4.2 * len(lost), 4.0), sharey=True)
+    fig, axes = plt.subplots(1, len(lost), figsize=(4.2 * len(lost), 4.3), sharey=True)
     axes = np.atleast_1d(axes)
     for ax, (pd, by_filter) in zip(axes, lost.items(), strict=True):
-        for name, ys in by_filter.items():
-            style = {**_style(name), "marker": "o", "markevery": 1}
-            if name.endswith("ukf"):
-                style["color"] = "tab:green"
-            elif name.endswith("rpf"):
-                style["color"] = "tab:blue"
-            ax.plot(xs, [100 * y for y in ys], label=name, **style)
+        for i, (name, ys) in enumerate(by_filter.items()):
+            marker = "o" if parse(name).particle else "s"
+            style = {**_style(name), "color": f"C{i}", "marker": marker}
+            ax.plot(xs, [100 * y for y in ys], label=name, **{**style, "markevery": 1})
         ax.axhline(100 * LOST_LEVEL, color="grey", lw=0.8, ls=":")
         ax.set_xscale("log")
         ax.set_xlabel(f"false alarms per 99% gate (0 drawn at {zero_at:g})")
         ax.set_title(f"pd = {pd:g}")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("lost runs [%]")
-    axes[0].legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()  # below the panels, off the lines
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
