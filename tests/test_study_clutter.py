@@ -57,6 +57,15 @@ def test_the_measured_clutter_per_gate_is_the_asked_one_within_poisson_error(
     assert abs(got - per_gate) <= 4.0 * math.sqrt(per_gate / scans)
 
 
+def test_the_clutter_counts_are_the_same_from_the_pool_in_order() -> None:
+    """The study counts its cells' false alarms in the gate on its runner's pool
+    (:meth:`Runner.map`): every count is the one counted here, in the cells' order."""
+    cells = configs(Setting(runs=3), 0.9, (0.0, 4.0, 0.5), K=10)
+    here = [measured_per_gate(c) for c in cells]
+    assert Runner(workers=2).map(measured_per_gate, cells) == here
+    assert here[0] == (0.0, 30) and here[1] != here[2]
+
+
 def test_the_5pct_density_is_interpolated_in_log_density() -> None:
     grid = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0, 4.0)
     # 3% at 1, 10% at 2: 5% lies 2/7 of the way from log 1 to log 2

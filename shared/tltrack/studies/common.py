@@ -10,11 +10,13 @@ error).
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor
+from concurrent.futures import Executor, ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +28,8 @@ from tltrack.engine.setup import PRIMARY, Setup
 from tltrack.studies import finished
 
 Results = dict[str, FilterResult]
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 @dataclass(frozen=True)
@@ -42,6 +46,16 @@ class Runner:
 
     def run(self, cfg: Config, names: Sequence[str]) -> Results:
         return self.sweep([cfg], names)[0]
+
+    def map(self, fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
+        """``fn`` (a module's function, so that it pickles) over ``items``, in order, where the
+        batches run: the cluster's executor, else a local pool of ``workers`` processes (all
+        cores by default), or here when that is one. For a study's work beside the engine's."""
+        workers = max(1, min(self.workers or os.cpu_count() or 1, len(items)))
+        if self.executor is None and workers == 1:
+            return [fn(x) for x in items]
+        with nullcontext(self.executor) if self.executor else ProcessPoolExecutor(workers) as pool:
+            return list(pool.map(fn, items))
 
     def sweep(
         self, cfgs: Sequence[Config], names: Sequence[str], *, time_steps: bool = True
