@@ -1,11 +1,14 @@
 """Every service's settings share one base (:class:`tltrack.live.service.ServiceSettings`): a
 misspelt log level is refused at start with the field named, from a flag or the environment,
-where it used to pass and then crash :mod:`logging` with a traceback."""
+where it used to pass and then crash :mod:`logging` with a traceback; so is a Zenoh endpoint
+that zenoh would crash on or dial for ever, in a service and in ``tltrack router``."""
 
 import importlib
 
 import pytest
+from tltrack.app import app
 from tltrack.live.service import ServiceSettings, load_settings
+from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
 
@@ -43,3 +46,29 @@ def test_a_misspelt_log_level_stops_the_service_naming_the_field(
     assert flag.value.code == env.value.code == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 2 and all("log_level" in line and "'INFO'" in line for line in err), err
+
+
+@pytest.mark.parametrize("module", SERVICES)
+def test_a_bad_zenoh_endpoint_stops_the_service_naming_it(
+    module: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("TLTRACK_ZENOH_ENDPOINTS", "tcp/127.0.0.1:7447,tcp-127.0.0.1")
+    with pytest.raises(SystemExit) as stop:
+        load_settings(_settings(module), [])
+    assert stop.value.code == 2
+    assert "endpoints" in (err := capsys.readouterr().err) and "'tcp-127.0.0.1'" in err
+
+
+@pytest.mark.parametrize(
+    ("args", "env", "said"),
+    [
+        (["--listen", "tcp/0.0.0.0"], {}, "'tcp/0.0.0.0': its address must be host:port"),
+        (["--connect", "tls/r:99999"], {}, "the port 0-65535"),
+        ([], {"TLTRACK_ZENOH_LEASE_MS": "1"}, "lease_ms: Input should be greater than"),
+    ],
+)
+def test_a_router_refuses_a_bad_endpoint_or_setting_at_start(
+    args: list[str], env: dict[str, str], said: str
+) -> None:
+    r = CliRunner().invoke(app, ["router", *args], env=env)
+    assert r.exit_code == 2 and said in " ".join(r.output.split()), r.output

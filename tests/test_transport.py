@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import queue
+import re
 import shutil
 import signal
 import subprocess
@@ -189,6 +190,7 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
     monkeypatch.setenv("TLTRACK_ZENOH_USERNAME", "primary")
     monkeypatch.setenv("TLTRACK_ZENOH_PASSWORD", "s3cret")
     monkeypatch.setenv("TLTRACK_ZENOH_TLS_ROOT_CA", str(tmp_path / "ca.pem"))
+    (tmp_path / "ca.pem").write_text("")  # a file it names must be there: its contents are TLS's
     s = ZenohSettings()
     assert s.mode == "peer"
     assert s.endpoints == ["tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447"]
@@ -216,6 +218,35 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
 def test_settings_refuse_inconsistent_values(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError):
         ZenohSettings(**kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "said"),
+    [
+        ({"endpoints": ["garbage"]}, "is not <protocol>/<address>"),
+        ({"endpoints": ["tcp/127.0.0.1"]}, "host:port"),  # zenoh dials this for ever
+        ({"endpoints": ["tcp/127.0.0.1:notaport"]}, "host:port"),  # ... and this
+        ({"listen": ["tls/0.0.0.0:70000"]}, "the port 0-65535"),
+        ({"endpoints": ["bogus/x"]}, "zenoh has no protocol 'bogus'"),  # ... and this
+        ({"tls_root_ca": "/nonexistent/ca.pem"}, "does not point to a file"),  # a client hung
+        ({"access_control_file": "ACL"}, "zenoh refuses it: --> 1:1"),  # a traceback at start
+    ],
+)
+@pytest.mark.unit
+def test_settings_refuse_what_zenoh_would_crash_or_hang_on(
+    kwargs: dict[str, object], said: str, tmp_path: Path
+) -> None:
+    if kwargs.get("access_control_file") == "ACL":  # a file, but not JSON5
+        (tmp_path / "acl.json5").write_text("rules: [")
+        kwargs = {"access_control_file": tmp_path / "acl.json5"}
+    with pytest.raises(ValueError, match=re.escape(said)):
+        ZenohSettings(**kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.unit
+def test_settings_take_every_form_of_endpoint_zenoh_takes() -> None:
+    ok = ["tcp/[::1]:7447", "unixsock-stream//tmp/z.sock", "tcp/h:7447?iface=lo#rx_buffer=1"]
+    assert ZenohSettings(endpoints=ok, listen=["udp/0.0.0.0:0"]).endpoints == ok
 
 
 # ---- process helpers --------------------------------------------------------------------------

@@ -282,7 +282,7 @@ def test_the_config_logs_in_as_the_operator_with_the_services_settings(tmp_path:
     [
         (["--as", "primray"], "not in the manifest"),
         (["--as", "referee", "--identity", "primary"], "not an identity"),
-        (["--as", "primary", "--endpoint", "tcp-127.0.0.1"], "zenoh refuses"),
+        (["--as", "primary", "--endpoint", "tcp-127.0.0.1"], "is not <protocol>/<address>"),
     ],
 )
 def test_the_config_refuses_what_it_cannot_log_in_as(

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from tltrack.app.common import app, console
+from tltrack.app.common import app, console, refused
 
 if TYPE_CHECKING:
     from tltrack.live.manifest import Manifest
@@ -121,8 +121,7 @@ def zenoh_cli_config(
         console.print(f"[red]error:[/red] --as: {err}")
         raise typer.Exit(2) from None
     except ValueError as err:  # a setting zenoh or the settings' checks refuse
-        console.print(f"[red]error:[/red] {err}")
-        raise typer.Exit(2) from None
+        raise refused(err) from None
     path = out or Path(f"zenoh-cli-{m.operator(operator).router}.json5")
     try:
         access.write_private(path, text)

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import (
     BarColumn,
@@ -22,7 +23,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from tltrack.config import Config, ConfigError, DetectionSpec
+from tltrack.config import Config, ConfigError, DetectionSpec, describe_validation_error
 
 app = typer.Typer(
     help="Bayesian transfer learning between tracking operators (TL-PF): experiments, "
@@ -31,6 +32,14 @@ app = typer.Typer(
     rich_markup_mode="markdown",
 )
 console = Console(stderr=True)
+
+
+def refused(err: ValueError) -> typer.Exit:
+    """Print why a value was refused, a pydantic error one field a line, and the exit (status 2)
+    to raise: ``raise refused(err) from None``."""
+    said = describe_validation_error(err) if isinstance(err, ValidationError) else str(err)
+    console.print(f"[red]error:[/red] {said}")
+    return typer.Exit(2)
 
 
 #: how often a long job writes its progress when stderr is not a terminal [s]

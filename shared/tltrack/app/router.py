@@ -8,10 +8,7 @@ from typing import Annotated
 import typer
 
 from tltrack.app.access import ManifestOption, manifest_or_exit
-from tltrack.app.common import (
-    app,
-    console,
-)
+from tltrack.app.common import app, console, refused
 
 
 @app.command()
@@ -42,7 +39,7 @@ def router(
     from tltrack.live import access
     from tltrack.live.manifest import ManifestError
     from tltrack.live.router import run_router
-    from tltrack.wire.transport import ZenohSettings
+    from tltrack.wire.transport import ZenohSettings, check_endpoint
 
     with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
         if operator is not None:
@@ -53,4 +50,10 @@ def router(
                 raise typer.Exit(2) from None
             for name, value in env.items():
                 os.environ.setdefault(name, value)
-        run_router(listen or ["tcp/0.0.0.0:7447"], ZenohSettings(), connect=connect)
+        try:
+            settings = ZenohSettings()
+            for endpoint in [*(listen or []), *(connect or [])]:
+                check_endpoint(endpoint)
+        except ValueError as err:  # TLTRACK_ZENOH_*, --listen, --connect
+            raise refused(err) from None
+        run_router(listen or ["tcp/0.0.0.0:7447"], settings, connect=connect)

@@ -24,11 +24,10 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
 import zenoh
-from pydantic import Field, SecretStr, field_validator, model_validator
+from pydantic import Field, FilePath, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
@@ -57,6 +56,36 @@ def _split_list(v: Any) -> Any:
             return json.loads(text)
         return [part.strip() for part in text.split(",") if part.strip()]
     return v
+
+
+#: zenoh's link protocols whose address is host:port, and the others
+HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+PROTOCOLS = (*HOST_PORT_PROTOCOLS, "unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def check_endpoint(endpoint: str) -> str:
+    """``endpoint``, or ``ValueError`` saying what is wrong with it. Zenoh refuses a malformed
+    endpoint only as a session opens, with a traceback, and a client dials one of an unknown
+    protocol, or whose port is not a number, for ever: all are caught here, at start."""
+    locator = endpoint.split("#", 1)[0].split("?", 1)[0]
+    protocol, _, address = locator.partition("/")
+    if not protocol or not address:
+        raise ValueError(f"{endpoint!r} is not <protocol>/<address>, e.g. {DEFAULT_ENDPOINT}")
+    if protocol not in PROTOCOLS:
+        known = ", ".join(PROTOCOLS)
+        raise ValueError(f"{endpoint!r}: zenoh has no protocol {protocol!r} ({known})")
+    if protocol in HOST_PORT_PROTOCOLS:
+        host, _, port = address.rpartition(":")
+        if not host or not port.isdigit() or int(port) > 65535:
+            raise ValueError(f"{endpoint!r}: its address must be host:port, the port 0-65535")
+    return endpoint
+
+
+def _refusal(err: zenoh.ZError) -> str:
+    """What zenoh says of a configuration it refuses, without the Rust source locations."""
+    said = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', str(err))
+    text = said.group(1).replace("\\n", " ") if said else str(err)
+    return f"zenoh refuses it: {' '.join(text.split())}"
 
 
 class ZenohSettings(BaseSettings):
@@ -90,18 +119,23 @@ class ZenohSettings(BaseSettings):
     keep_alive: Annotated[int, Field(ge=1, le=100)] = 4  #: keep-alives sent per lease
     username: str | None = None
     password: SecretStr | None = None
-    usrpwd_dictionary_file: Path | None = None
-    tls_root_ca: Path | None = None
-    tls_cert: Path | None = None
-    tls_key: Path | None = None
+    usrpwd_dictionary_file: FilePath | None = None
+    tls_root_ca: FilePath | None = None
+    tls_cert: FilePath | None = None
+    tls_key: FilePath | None = None
     tls_mtls: bool = False
     tls_verify_name: bool = True
-    access_control_file: Path | None = None
+    access_control_file: FilePath | None = None
 
     @field_validator("endpoints", "listen", mode="before")
     @classmethod
     def _lists(cls, v: Any) -> Any:
         return _split_list(v)
+
+    @field_validator("endpoints", "listen")
+    @classmethod
+    def _endpoints(cls, v: list[str]) -> list[str]:
+        return [check_endpoint(e) for e in v]
 
     @model_validator(mode="after")
     def _consistent(self) -> ZenohSettings:
@@ -113,6 +147,10 @@ class ZenohSettings(BaseSettings):
             raise ValueError("tls_mtls needs tls_root_ca, tls_cert and tls_key")
         if self.mode == "client" and not self.endpoints:
             raise ValueError("a client needs at least one endpoint to connect to")
+        try:  # what zenoh alone knows to refuse (an access control file it cannot parse)
+            self.to_config()
+        except zenoh.ZError as err:
+            raise ValueError(_refusal(err)) from None
         return self
 
     def entries(self) -> list[tuple[str, str]]:
@@ -168,12 +206,8 @@ class ZenohSettings(BaseSettings):
 
     def to_json5(self) -> str:
         """:meth:`entries` as the text of a zenoh config file (``zenoh.Config.from_file``), each
-        value as zenoh itself parsed it; ``ValueError`` for one it refuses (a bad endpoint)."""
-        try:
-            cfg = self.to_config()
-        except zenoh.ZError as err:  # its message, without the Rust source locations
-            said = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', str(err))
-            raise ValueError(f"zenoh refuses it: {said.group(1) if said else err}") from None
+        value as zenoh itself parsed it."""
+        cfg = self.to_config()
         tree: dict[str, Any] = {}
         for key, _ in self.entries():
             *parents, leaf = key.split("/")
