@@ -117,15 +117,16 @@ class ZenohSettings(BaseSettings):
     #: link lease: a hung peer is declared dead (its tokens dropped) after this long
     lease_ms: Annotated[int, Field(ge=500, le=600_000)] = 2000
     keep_alive: Annotated[int, Field(ge=1, le=100)] = 4  #: keep-alives sent per lease
-    username: str | None = None
+    username: str | None = None  #: a client's login, with ``password``
     password: SecretStr | None = None
+    #: a router's logins, ``user:password`` a line (a file that must exist, as every file here)
     usrpwd_dictionary_file: FilePath | None = None
-    tls_root_ca: FilePath | None = None
-    tls_cert: FilePath | None = None
+    tls_root_ca: FilePath | None = None  #: the CA certificate (PEM) that signs the routers'
+    tls_cert: FilePath | None = None  #: this side's certificate (PEM), with ``tls_key``
     tls_key: FilePath | None = None
-    tls_mtls: bool = False
-    tls_verify_name: bool = True
-    access_control_file: FilePath | None = None
+    tls_mtls: bool = False  #: clients present a certificate too
+    tls_verify_name: bool = True  #: a client checks the router's name in its certificate
+    access_control_file: FilePath | None = None  #: a router's ``access_control`` section (JSON5)
 
     @field_validator("endpoints", "listen", mode="before")
     @classmethod
