@@ -72,3 +72,22 @@ def test_a_router_refuses_a_bad_endpoint_or_setting_at_start(
 ) -> None:
     r = CliRunner().invoke(app, ["router", *args], env=env)
     assert r.exit_code == 2 and said in " ".join(r.output.split()), r.output
+
+
+@pytest.mark.parametrize(
+    ("module", "flag", "said"),
+    [
+        ("tltrack.services.sensor_sim.simulator", '--wait_for=["primary"]', "operator:service"),
+        ("tltrack.services.sensor_sim.simulator", '--wait_for=["a:scorer"]', "operator 'a'"),
+        ("tltrack.services.sensor_sim.simulator", '--wait_for=["primary:b c"]', "name 'b c'"),
+        ("tltrack.services.sensor.sensor", "--replay_csv=/nonexistent.csv", "does not point"),
+    ],
+)
+def test_what_a_sensor_would_wait_on_or_fail_at_is_refused_at_start(
+    module: str, flag: str, said: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A token no service declares was awaited until the timeout (or crashed the wait); a
+    missing replay file was found only once an episode started."""
+    with pytest.raises(SystemExit) as stop:
+        load_settings(_settings(module), [flag])
+    assert stop.value.code == 2 and said in capsys.readouterr().err

@@ -13,11 +13,10 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
+from pydantic import Field, FilePath
 from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config
 from tltrack.config.timeline import Timeline
@@ -45,7 +44,7 @@ class Settings(ServiceSettings):
         PRIMARY, pattern=r"^[A-Za-z0-9_-]{1,32}$", description="'primary' or a source id"
     )
     max_episodes: int = Field(4, ge=1, description="episodes measured at once")
-    replay_csv: Path | None = Field(None, description="replay this sensor's recorded rows")
+    replay_csv: FilePath | None = Field(None, description="replay this sensor's recorded rows")
 
 
 def operator(sensor: str) -> str:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config, load_config
 from tltrack.engine.scenario import Run, simulate
@@ -75,6 +75,18 @@ class Settings(ServiceSettings):
     )
     wait_timeout_s: float = Field(60.0, gt=0)
     linger_s: float = Field(1.0, ge=0, description="wait before closing, so the link drains")
+
+    @field_validator("wait_for")
+    @classmethod
+    def _tokens(cls, v: list[str]) -> list[str]:
+        """Each an ``operator:service`` that can be a token's key (a wrong one would be waited
+        for until the timeout, or crash the wait)."""
+        for token in v:
+            operator, sep, service = token.partition(":")
+            if not sep:
+                raise ValueError(f"{token!r} is not operator:service, e.g. primary:primary_tracker")
+            keys.alive(operator, service)  # ValueError naming the bad part
+        return v
 
     def load_config(self) -> Config:
         over: dict[str, Any] = {
