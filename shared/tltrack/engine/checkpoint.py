@@ -191,12 +191,16 @@ def _differences(theirs: Any) -> str:
     return f"{differ} differ{unknown}; CPU {theirs.get('cpu', 'unknown')}, here {mine['cpu']}"
 
 
-def _same_sweep(folder: Path, pattern: str, key: str) -> list[tuple[Path, Any]]:
-    """Every file of ``folder.glob(pattern)`` (by name) whose JSON records ``made.key == key`` (a
-    digest without the environment, :meth:`Checkpoint.key`), with its document. Files that cannot
-    be read are skipped here: their own sweep warns of them."""
+def _same_sweep(
+    folder: Path, pattern: str, key: str, besides: Path | None = None
+) -> list[tuple[Path, Any]]:
+    """Every file of ``folder.glob(pattern)`` (by name) but ``besides`` (read already) whose JSON
+    records ``made.key == key`` (a digest without the environment, :meth:`Checkpoint.key`), with
+    its document. Files that cannot be read are skipped here: their own sweep warns of them."""
     found = []
     for other in sorted(Path(folder).glob(pattern)):
+        if other == besides:
+            continue
         try:
             doc = json.loads(other.read_text(encoding="utf-8"))
             made = doc["made"]
@@ -341,9 +345,7 @@ class Checkpoint:
                 candidates.append((own, json.loads(own.read_text(encoding="utf-8"))))
             except (OSError, ValueError) as err:
                 self._unreadable(own, err)
-        candidates += [
-            c for c in _same_sweep(self.folder, f"prefix-*-b{bs}.json", key) if c[0] != own
-        ]
+        candidates += _same_sweep(self.folder, f"prefix-*-b{bs}.json", key, besides=own)
         usable: list[tuple[int, Path, Any]] = []  # (batches, file, document)
         for path, doc in candidates:
             try:
