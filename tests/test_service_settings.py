@@ -74,6 +74,17 @@ def test_a_router_refuses_a_bad_endpoint_or_setting_at_start(
     assert r.exit_code == 2 and said in " ".join(r.output.split()), r.output
 
 
+def test_run_router_refuses_a_bad_endpoint_before_opening_a_session() -> None:
+    """Its other callers (the demo, topologies, tests) pass endpoints the CLI never checked: a
+    settings copy would skip validation and leave zenoh to fail as the session opens."""
+    from tltrack.live.router import run_router
+
+    with pytest.raises(ValueError, match="its address must be host:port"):
+        run_router(["tcp/127.0.0.1"], announce=False)
+    with pytest.raises(ValueError, match="zenoh has no protocol 'bogus'"):
+        run_router(["tcp/127.0.0.1:0"], connect=["bogus/x"], announce=False)
+
+
 @pytest.mark.parametrize(
     ("module", "flag", "said"),
     [

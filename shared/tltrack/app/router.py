@@ -38,8 +38,8 @@ def router(
 
     from tltrack.live import access
     from tltrack.live.manifest import ManifestError
-    from tltrack.live.router import run_router
-    from tltrack.wire.transport import ZenohSettings, check_endpoint
+    from tltrack.live.router import router_settings, run_router
+    from tltrack.wire.transport import ZenohSettings
 
     with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
         if operator is not None:
@@ -50,10 +50,9 @@ def router(
                 raise typer.Exit(2) from None
             for name, value in env.items():
                 os.environ.setdefault(name, value)
+        listen = listen or ["tcp/0.0.0.0:7447"]
         try:
-            settings = ZenohSettings()
-            for endpoint in [*(listen or []), *(connect or [])]:
-                check_endpoint(endpoint)
+            settings = router_settings(listen, ZenohSettings(), connect)
         except ValueError as err:  # TLTRACK_ZENOH_*, --listen, --connect
             raise refused(err) from None
-        run_router(listen or ["tcp/0.0.0.0:7447"], settings, connect=connect)
+        run_router(listen, settings, connect=connect)

@@ -22,6 +22,19 @@ from tltrack.wire.transport import ZenohSettings
 log = logging.getLogger(__name__)
 
 
+def router_settings(
+    listen: list[str], settings: ZenohSettings | None = None, connect: list[str] | None = None
+) -> ZenohSettings:
+    """``settings`` (its security options) as a router's on ``listen``, meshed with ``connect``:
+    validated again, as ``model_copy`` would not, so a bad endpoint is refused here
+    (``ValueError``) rather than by zenoh as the session opens."""
+    if not listen:
+        raise ValueError("a router needs at least one listen endpoint")
+    base = (settings or ZenohSettings()).model_dump()
+    update = {"mode": "router", "listen": list(listen), "endpoints": list(connect or [])}
+    return ZenohSettings.model_validate(base | update)
+
+
 def run_router(
     listen: list[str],
     settings: ZenohSettings | None = None,
@@ -38,12 +51,7 @@ def run_router(
     ``announce`` a line ``tltrack router <zid> listening on <endpoints>`` goes to stdout once the
     router is listening. Signal handlers are installed only when called from the main thread.
     """
-    if not listen:
-        raise ValueError("a router needs at least one listen endpoint")
-    base = settings or ZenohSettings()
-    cfg = base.model_copy(
-        update={"mode": "router", "listen": list(listen), "endpoints": list(connect or [])}
-    )
+    cfg = router_settings(listen, settings, connect)
     stop = stop or threading.Event()
 
     previous: dict[signal.Signals, Any] = {}
