@@ -29,14 +29,7 @@ since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
 command -v docker >/dev/null 2>&1 || die "docker is not installed"
 docker info >/dev/null 2>&1 || die "cannot reach the Docker Engine"
 
-if [[ -n "${TLTRACK_PYTHON:-}" ]]; then
-    PY="$TLTRACK_PYTHON"
-elif [[ -x "$ROOT/.venv/bin/python" ]]; then
-    PY="$ROOT/.venv/bin/python"
-else
-    PY="python3"
-fi
-"$PY" -m pip --version >/dev/null 2>&1 || die "$PY has no pip"
+source "$ROOT/scripts/host_python.sh"
 HOST_PY="$("$PY" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
 
 # --- base image --------------------------------------------------------------------------------

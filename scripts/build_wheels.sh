@@ -20,14 +20,7 @@ OUT="${1:-build/wheels}"
 log() { printf '[build_wheels] %s\n' "$*" >&2; }
 die() { log "error: $*"; exit 1; }
 
-if [[ -n "${TLTRACK_PYTHON:-}" ]]; then
-    PY="$TLTRACK_PYTHON"
-elif [[ -x "$ROOT/.venv/bin/python" ]]; then
-    PY="$ROOT/.venv/bin/python"
-else
-    PY="python3"
-fi
-"$PY" -m pip --version >/dev/null 2>&1 || die "$PY has no pip"
+source "$ROOT/scripts/host_python.sh"
 "$PY" -m build --version >/dev/null 2>&1 || die "$PY has no 'build' (pip install build)"
 
 mkdir -p "$OUT"
