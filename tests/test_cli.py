@@ -110,6 +110,41 @@ def test_help_has_examples():
     assert r.exit_code == 0 and "Examples" in r.output
 
 
+def _commands(group, path=()):
+    """Every command of the CLI, as (its words, the click command)."""
+    for name, cmd in group.commands.items():
+        if hasattr(cmd, "commands"):
+            yield from _commands(cmd, (*path, name))
+        else:
+            yield (*path, name), cmd
+
+
+def _literal(word: str) -> str:
+    """A word of help as it should print: no markdown code marks or escapes, no end stop."""
+    return word.replace("`", "").replace("\\", "").rstrip(".,:;)")
+
+
+def test_help_prints_placeholders_and_wildcards_as_written():
+    """The help is markdown: an unquoted <id> was dropped as an HTML tag and a pair of * taken
+    for emphasis, so ``subscribe -k 'tltrack/source/*/transfer/*'`` printed without its stars."""
+    import typer.main
+
+    checked = 0
+    for words, cmd in _commands(typer.main.get_command(app)):
+        texts = [
+            cmd.help or "",
+            cmd.epilog or "",
+            *(getattr(p, "help", "") or "" for p in cmd.params),
+        ]
+        wanted = {_literal(w) for t in texts for w in t.split() if re.search(r"[<>*]", w)}
+        r = runner.invoke(app, [*words, "--help"], terminal_width=400)
+        said = " ".join(r.output.replace("│", " ").split())
+        for word in wanted:
+            checked += 1
+            assert word in said, (words, word)
+    assert checked >= 6  # source/<id> twice, router-<operator>, the key expression, ...
+
+
 @pytest.mark.parametrize(
     "name", ["robust", "sources", "budget", "heterogeneous", "presets", "intensities"]
 )

@@ -79,18 +79,19 @@ def generate(
 @access_app.command(
     "zenoh-cli-config",
     epilog="Example:\n\n    tltrack access zenoh-cli-config --as primary --out primary.json5\n\n"
-    "    zenoh --config primary.json5 subscribe -k 'tltrack/source/*/transfer/*' "
+    "    zenoh --config primary.json5 subscribe -k 'tltrack/source/\\*/transfer/\\*' "
     "--decoder tltrack",
 )
 def zenoh_cli_config(
     operator: Annotated[
         str,
         typer.Option(
-            "--as", help="the operator to log in as: referee, primary, source/<id> (the manifest's)"
+            "--as",
+            help="the operator to log in as: referee, primary, `source/<id>` (the manifest's)",
         ),
     ],
     out: Annotated[
-        Path | None, typer.Option(help="the file to write [zenoh-cli-<operator>.json5]")
+        Path | None, typer.Option(help="the file to write [`zenoh-cli-<operator>.json5`]")
     ] = None,
     endpoint: Annotated[
         str | None, typer.Option(help="the router to connect to [tcp/127.0.0.1:7447]")

@@ -21,8 +21,8 @@ def router(
         str | None,
         typer.Option(
             help="be this operator's router of the federated topology (referee, primary, "
-            "source/<id>, as the operator manifest lists them): its ACL and dictionary, dialling "
-            "as router-<operator>"
+            "`source/<id>`, as the operator manifest lists them): its ACL and dictionary, dialling "
+            "as `router-<operator>`"
         ),
     ] = None,
     manifest: ManifestOption = None,

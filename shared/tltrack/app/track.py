@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 )
 def track(
     scans: Annotated[
-        Path, typer.Option(help="the recorded scans (CSV k,sensor,<components>[,is_clutter])")
+        Path, typer.Option(help="the recorded scans (CSV `k,sensor,<components>[,is_clutter]`)")
     ],
     out: Annotated[Path, typer.Option(help="output directory")],
     config: Annotated[Path | None, typer.Option(help="TOML or JSON config file")] = None,
