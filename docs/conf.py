@@ -46,6 +46,8 @@ source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 # option names stay ``--flags`` (no en dashes) and quotes stay straight, as in a terminal
 smartquotes = False
+#: the command's help is Markdown, where `x` is code: in reStructuredText too (sphinx-click)
+default_role = "literal"
 exclude_patterns = [
     "_build",
     "**/*.ipynb",
