@@ -323,3 +323,48 @@ def test_a_bad_config_file_is_named_with_its_one_problem(tmp_path, content, name
     r = runner.invoke(app, ["experiment", "--config", str(cfg), "--out", str(tmp_path)])
     said = " ".join(r.output.split())
     assert r.exit_code == 2 and says in said and not_said not in said, r.output
+
+
+@pytest.fixture(scope="module")
+def small_results(tmp_path_factory) -> dict:
+    """A results document of two runs, for the figures' checks to spoil."""
+    out = tmp_path_factory.mktemp("small")
+    args = ["experiment", "--filters", "ukf,tl-ukf", "--runs", "2", "--workers", "1"]
+    assert runner.invoke(app, [*args, "--out", str(out)]).exit_code == 0
+    return json.loads((out / "results.json").read_text())
+
+
+@pytest.mark.parametrize(
+    ("spoil", "says"),
+    [
+        (lambda d: d["filters"].update(zzz=d["filters"]["ukf"]), "unknown filter 'zzz'"),
+        (lambda d: d["filters"]["ukf"].update(rmse_per_step=["a"]), "ukf.rmse_per_step: not a"),
+        (lambda d: d["filters"]["ukf"].update(rmse_per_step=[[1.0]]), "ukf.rmse_per_step: not a"),
+        (lambda d: d["filters"]["ukf"].update(rmse_per_step=[]), "ukf.rmse_per_step: not a"),
+        (lambda d: d["filters"]["ukf"].update(rmse_overall=True), "ukf.rmse_overall: not a"),
+        (lambda d: d.update(pcrlb="x"), "pcrlb: not a map of names to lists of numbers"),
+        (lambda d: d.update(pcrlb={"x": 5}), "pcrlb: not a map"),
+        (lambda d: d.update(pcrlb={"x": ["abc"]}), "pcrlb: not a map"),
+        (lambda d: d["config"].update(K=-3), "config: K: Input should be greater than"),
+    ],
+)
+def test_plot_refuses_what_its_figures_cannot_draw(tmp_path, small_results, spoil, says):
+    """Each was a traceback (or, for the empty and NaN series, a blank figure)."""
+    import copy
+
+    doc = copy.deepcopy(small_results)
+    doc["filters"]["ukf"]["rmse_per_step"][0] = float("nan")  # one NaN is still a figure
+    spoil(doc)
+    path = tmp_path / "results.json"
+    path.write_text(json.dumps(doc))
+    r = runner.invoke(app, ["plot", str(path)])
+    assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
+    assert "errors.pydantic.dev" not in r.output and not list(tmp_path.glob("*.png"))
+
+
+def test_plot_draws_a_series_with_a_gap(tmp_path, small_results):
+    doc = json.loads(json.dumps(small_results))
+    doc["filters"]["ukf"]["rmse_per_step"][0] = float("nan")
+    (tmp_path / "results.json").write_text(json.dumps(doc))
+    r = runner.invoke(app, ["plot", str(tmp_path / "results.json")])
+    assert r.exit_code == 0 and (tmp_path / "rmse.png").stat().st_size > 10_000, r.output

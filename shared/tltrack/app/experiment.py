@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from tltrack.app.common import (
     BatchSize,
@@ -21,6 +23,32 @@ from tltrack.app.common import (
     filter_names,
     progress_bar,
 )
+
+
+def _numbers(v: Any) -> bool:
+    """A list of numbers, not all of them NaN (a figure of nothing is no figure)."""
+    return (
+        isinstance(v, list)
+        and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+        and any(math.isfinite(x) for x in v)
+    )
+
+
+def _drawable(doc: dict[str, Any]) -> None:
+    """What the figures read beyond what :func:`tltrack.engine.results.read` checks: each
+    filter's name (its run is traced again) and RMSE, and the PCRLB; ``ValueError`` naming the
+    field."""
+    from tltrack.engine.registry import parse
+
+    for name, r in doc["filters"].items():
+        parse(name.split("/", 1)[0])
+        if not _numbers(r["rmse_per_step"]):
+            raise ValueError(f"filters.{name}.rmse_per_step: not a list of numbers")
+        if isinstance(r["rmse_overall"], bool):
+            raise ValueError(f"filters.{name}.rmse_overall: not a number")
+    pcrlb = doc.get("pcrlb", {})
+    if not isinstance(pcrlb, dict) or not all(_numbers(b) for b in pcrlb.values()):
+        raise ValueError("pcrlb: not a map of names to lists of numbers")
 
 
 @app.command(
@@ -181,15 +209,24 @@ def plot(
 
     Example: `tltrack plot out/experiment/results.json`
     """
-    from tltrack.config import Config
+    from pydantic import ValidationError
+
+    from tltrack.config import Config, describe_validation_error
     from tltrack.engine.experiment import draw
     from tltrack.engine.results import read
 
     try:
         doc = read(results_json)
         cfg = Config.model_validate(doc["config"])
-    except (OSError, ValueError) as err:  # a pydantic ValidationError is a ValueError
-        console.print(f"[red]error:[/red] cannot read {results_json}: {err}")
+        _drawable(doc)
+    except ValidationError as err:
+        console.print(
+            f"[red]error:[/red] cannot read {results_json}: config: "
+            f"{escape(describe_validation_error(err))}"
+        )
+        raise typer.Exit(2) from None
+    except (OSError, ValueError) as err:
+        console.print(f"[red]error:[/red] cannot read {results_json}: {escape(str(err))}")
         raise typer.Exit(2) from None
     for p in draw(doc, checked_folder(out or results_json.parent), cfg):
         console.print(f"wrote {p}")
