@@ -142,9 +142,16 @@ def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
         (["--to", "tcp/127.0.0.1:1", "--listen", "bogus"], "--listen 'bogus'"),
         (["--to", "bogus"], "--to 'bogus'"),
         (["--to", "tcp/127.0.0.1:99999"], "--to 'tcp/127.0.0.1:99999'"),
+        (["--to", "udp/127.0.0.1:7447"], "the link relays TCP only"),  # was relayed as TCP
+        # were taken, leaving a link that never delivers; the control file refused them
+        (["--to", "tcp/127.0.0.1:1", "--delay-ms", "inf"], "--delay-ms must be in [0, 3600000]"),
+        (["--to", "tcp/127.0.0.1:1", "--delay-ms", "1e12"], "--delay-ms must be in"),
+        (["--to", "tcp/127.0.0.1:1", "--jitter-ms", "nan"], "--jitter-ms must be in"),
+        (["--to", "tcp/127.0.0.1:1", "--rate-kbps", "inf"], "--rate-kbps must be finite and > 0"),
+        (["--to", "tcp/127.0.0.1:1", "--rate-kbps", "0"], "--rate-kbps must be finite and > 0"),
     ],
 )
-def test_link_refuses_an_endpoint_naming_the_option(args, says):
+def test_link_refuses_an_endpoint_or_a_shape_naming_the_option(args, says):
     from tltrack.app import app
     from typer.testing import CliRunner
 

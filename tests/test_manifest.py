@@ -46,6 +46,25 @@ def test_a_bad_manifest_is_refused_naming_the_file_and_the_field(tmp_path: Path)
         load_manifest(bad)
     with pytest.raises(ManifestError, match="cannot read"):
         load_manifest(tmp_path / "missing.toml")
+    bad.write_bytes(b"\xff\xfe\x00bad")  # was a UnicodeDecodeError's traceback
+    with pytest.raises(ManifestError, match=r"ops\.toml: not UTF-8 text"):
+        load_manifest(bad)
+    for one, other in (("s1", "S1"), ("s-1", "s_1")):  # one password variable, one host name
+        bad.write_text(f'[[sources]]\nid = "{one}"\n[[sources]]\nid = "{other}"\n')
+        with pytest.raises(ManifestError, match="differ only in case or in - against _"):
+            load_manifest(bad)
+
+
+@pytest.mark.unit
+def test_a_refusal_prints_the_pattern_it_names(tmp_path: Path) -> None:
+    """rich took the pattern's [a-z0-9-] for markup and printed '^{1,40}$'."""
+    from tltrack.app import app
+    from typer.testing import CliRunner
+
+    bad = tmp_path / "ops.toml"
+    bad.write_text('[[sources]]\nid = "s1"\ncompose_profile = "Bad Profile"\n')
+    r = CliRunner().invoke(app, ["access", "show", "--manifest", str(bad)])
+    assert r.exit_code == 2 and "^[a-z0-9-]{1,40}$" in r.output, r.output
 
 
 @pytest.mark.integration
@@ -87,3 +106,20 @@ def test_a_fourth_source_from_the_manifest_runs_live_and_a_stranger_is_refused_e
     used = [live["tl-rpf"][k][1] for k in range(1, K + 1)]
     # mostly: a heartbeat held back past its timeout on a loaded machine cuts a step's transfer
     assert not used[0] and mostly_used(used[1:]), used
+
+
+@pytest.mark.unit
+def test_generate_into_a_partial_repository_writes_nothing(tmp_path: Path) -> None:
+    """It wrote acl.json5, then failed with a traceback on the missing routers/ folder."""
+    import shutil
+
+    from tltrack.app import app
+    from typer.testing import CliRunner
+
+    (tmp_path / "deploy").mkdir()
+    shutil.copy(ROOT / "deploy" / "compose.template.yaml", tmp_path / "deploy")
+    (tmp_path / "shared" / "tltrack" / "access").mkdir(parents=True)
+    r = CliRunner().invoke(app, ["access", "generate", "--root", str(tmp_path)])
+    said = "".join(r.output.split())  # rich breaks a long path anywhere
+    assert r.exit_code == 2 and "isnotatltrackrepository(no" in said, r.output
+    assert "access/routers" in said and not any((tmp_path / "shared").rglob("*.*"))

@@ -111,8 +111,13 @@ def test_to_stdout_and_an_episode_it_does_not_hold(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     got = [json.loads(line) for line in r.stdout.splitlines()]
     assert [(o["filter"], o["error_m"]) for o in got] == [("rpf", 3.0), ("tl-rpf", 5.0)]
-    r = scores("--jsonl", "-", "--db", str(db), "--episode", "ep-zz")
-    assert r.exit_code == 0 and r.stdout == "" and "no estimate" in r.output
+    kept = tmp_path / "kept.jsonl"
+    kept.write_text("an earlier export\n")
+    for typo in ("ep-zz", ""):  # refused before a file is written: the earlier one stays
+        r = scores("--jsonl", str(kept), "--db", str(db), "--episode", typo)
+        said = " ".join(r.output.split())
+        assert r.exit_code == 2 and f"no estimate of episode {typo!r}" in said, r.output
+        assert "['ep-a', 'ep-b']" in said and kept.read_text() == "an earlier export\n"
 
 
 def test_the_database_comes_from_the_scorers_variable(
@@ -125,11 +130,11 @@ def test_the_database_comes_from_the_scorers_variable(
     assert r.exit_code == 0 and len(r.stdout.splitlines()) == 8
 
 
-def _a_damaged_row(tmp_path: Path) -> Path:
+def _a_damaged_row(tmp_path: Path, pos: str = "[1]") -> Path:
     p = tmp_path / "scorer.sqlite"
     scorer_file(p).close()
     with sqlite3.connect(p) as con:
-        con.execute("UPDATE estimates SET pos = '[1]' WHERE k = 2 AND filter = 'rpf'")
+        con.execute("UPDATE estimates SET pos = ? WHERE k = 2 AND filter = 'rpf'", (pos,))
     return p
 
 
@@ -144,13 +149,14 @@ def _not_the_scorers(tmp_path: Path) -> Path:
     ("make", "needle"),
     [
         (lambda tmp: tmp / "absent.sqlite", "no such file"),
-        (lambda tmp: tmp, "no such file"),  # a directory
+        (lambda tmp: tmp, "a folder, not the scorer's file"),
         (lambda tmp: (tmp / "notes.txt").write_text("not sqlite" * 100) and tmp / "notes.txt",
          "not an SQLite database"),
         (_not_the_scorers, "not a scorer's database"),
-        (_a_damaged_row, "a position is two numbers, not '[1]'"),
+        (_a_damaged_row, "a position is two finite numbers, not '[1]'"),
+        (lambda tmp: _a_damaged_row(tmp, "[NaN, 1]"), "two finite numbers, not '[NaN, 1]'"),
     ],
-    ids=["missing", "directory", "text", "other-sqlite", "damaged-row"],
+    ids=["missing", "directory", "text", "other-sqlite", "damaged-row", "nan"],
 )  # fmt: skip
 def test_bad_input_exits_2_with_the_reason(tmp_path: Path, make: Any, needle: str) -> None:
     db = make(tmp_path)

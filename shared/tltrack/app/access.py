@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from tltrack.app.common import app, console, refused
+from tltrack.app.common import app, console, refused, say_error
 
 if TYPE_CHECKING:
     from tltrack.live.manifest import Manifest
@@ -33,7 +33,7 @@ def manifest_or_exit(path: Path | None) -> Manifest:
     try:
         return load_manifest(path)
     except ManifestError as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(2) from None
 
 
@@ -63,14 +63,19 @@ def generate(
 
     m = manifest_or_exit(manifest)
     if not (root / "deploy" / "compose.template.yaml").is_file():
-        console.print(f"[red]error:[/red] {root.resolve()} is not a tltrack repository")
+        say_error(f"{root.resolve()} is not a tltrack repository")
         raise typer.Exit(2)
     out_of_date = access.stale(m, root)
     if check:
         for p in out_of_date:
             console.print(f"out of date: {p}")
         raise typer.Exit(1 if out_of_date else 0)
-    for p, text in access.repository_files(m, root).items():
+    files = access.repository_files(m, root)
+    if missing := sorted({str(p.parent) for p in files if not p.parent.is_dir()}):
+        # checked before any file is written: a half-written set would disagree with itself
+        say_error(f"{root.resolve()} is not a tltrack repository (no {', '.join(missing)})")
+        raise typer.Exit(2)
+    for p, text in files.items():
         if p in out_of_date:
             p.write_text(text)
             console.print(f"wrote {p}")
@@ -119,7 +124,7 @@ def zenoh_cli_config(
         settings = access.client_settings(m, operator, endpoint or DEFAULT_ENDPOINT, identity)
         text = access.zenoh_cli_config(settings, operator)
     except ManifestError as err:
-        console.print(f"[red]error:[/red] --as: {err}")
+        say_error(f"--as: {err}")
         raise typer.Exit(2) from None
     except ValueError as err:  # a setting zenoh or the settings' checks refuse
         raise refused(err) from None
@@ -127,7 +132,7 @@ def zenoh_cli_config(
     try:
         access.write_private(path, text)
     except OSError as err:
-        console.print(f"[red]error:[/red] cannot write {path}: {err.strerror}")
+        say_error(f"cannot write {path}: {err.strerror}")
         raise typer.Exit(2) from None
     console.print(
         f"wrote {path} (mode 600): zenoh --config {path} subscribe -k KEY --decoder tltrack"

@@ -12,6 +12,7 @@ from tltrack.app.common import (
     app,
     checked_file,
     console,
+    say_error,
 )
 from tltrack.live.topology import Kind as TopologyKind
 
@@ -51,12 +52,12 @@ def bench_live(
 
     kinds_of_filter = tuple(f.strip() for f in filters.split(","))
     if unknown := [f for f in kinds_of_filter if f not in FILTERS or not FILTERS.get(f).particle]:
-        console.print(f"[red]error:[/red] --filters: not a particle filter kind: {unknown}")
+        say_error(f"--filters: not a particle filter kind: {unknown}")
         raise typer.Exit(2)
     try:
         ladder = [float(r) for r in rates.split(",")]
     except ValueError:
-        console.print(f"[red]error:[/red] --rates: not a list of numbers: {rates!r}")
+        say_error(f"--rates: not a list of numbers: {rates!r}")
         raise typer.Exit(2) from None
     try:
         with stop_on_signals():

@@ -13,6 +13,7 @@ from typing import Annotated, Any
 import typer
 from pydantic import ValidationError
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -38,8 +39,14 @@ def refused(err: ValueError) -> typer.Exit:
     """Print why a value was refused, a pydantic error one field a line, and the exit (status 2)
     to raise: ``raise refused(err) from None``."""
     said = describe_validation_error(err) if isinstance(err, ValidationError) else str(err)
-    console.print(f"[red]error:[/red] {said}")
+    say_error(said)
     return typer.Exit(2)
+
+
+def say_error(text: str) -> None:
+    """Print ``text`` as an error, as written: rich would take a bracketed part of it (a
+    pattern's ``[a-z0-9-]``, a list, a path) for markup and drop it."""
+    console.print(f"[red]error:[/red] {escape(text)}")
 
 
 #: how often a long job writes its progress when stderr is not a terminal [s]
@@ -154,7 +161,7 @@ def checked_folder(folder: Path, option: str = "--out", given: Path | None = Non
     except OSError as err:
         shown = given or folder
         where = f" ({err.filename})" if err.filename and err.filename != str(shown) else ""
-        console.print(f"[red]error:[/red] {option} {shown}: {err.strerror or err}{where}")
+        say_error(f"{option} {shown}: {err.strerror or err}{where}")
         raise typer.Exit(2) from None
     return folder
 
@@ -163,7 +170,7 @@ def checked_file(path: Path, option: str = "--out") -> Path:
     """An output file's path, refused at once (exit 2) when it is a folder or its folder cannot
     be written."""
     if path.is_dir():
-        console.print(f"[red]error:[/red] {option} {path}: a folder, not a file")
+        say_error(f"{option} {path}: a folder, not a file")
         raise typer.Exit(2)
     checked_folder(path.parent, option, given=path)
     return path
@@ -182,7 +189,7 @@ def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor
 
     address = cluster.address(scheduler)
     if reason := cluster.refuse_workers(address, workers):
-        console.print(f"[red]error:[/red] {reason}")
+        say_error(f"{reason}")
         raise typer.Exit(2)
     try:
         with cluster.pool(address, say=console.print) as ex:
@@ -190,7 +197,7 @@ def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor
                 console.print(f"batches go to the Dask cluster at {address}")
             yield ex
     except cluster.SchedulerError as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(1) from None
 
 
@@ -222,7 +229,7 @@ def build_config(config: Path | None, **overrides: Any) -> Config:
             )
         cfg = _with_detection(cfg, detection, source_detection)
     except ValueError as err:  # a ConfigError, or a truth file refused
-        console.print(f"[red]error:[/red] invalid configuration: {err}")
+        say_error(f"invalid configuration: {err}")
         raise typer.Exit(2) from None
     return cfg
 
@@ -237,14 +244,14 @@ def filter_names(filters: str, cfg: Config) -> list[str]:
     twice = sorted({n for n in names if names.count(n) > 1})
     problem = "name at least one filter" if not names else twice and f"{twice} named twice"
     if problem:
-        console.print(f"[red]error:[/red] --filters: {problem}")
+        say_error(f"--filters: {problem}")
         raise typer.Exit(2)
     try:
         for n in names:
             parse(n, trusted=True)
         check_filters(cfg, names)
     except ValueError as err:
-        console.print(f"[red]error:[/red] --filters: {err}")
+        say_error(f"--filters: {err}")
         raise typer.Exit(2) from None
     return names
 

@@ -16,6 +16,7 @@ from tltrack.app.common import (
     checked_folder,
     console,
     progress_bar,
+    say_error,
 )
 from tltrack.config import Config
 from tltrack.live.topology import Kind as TopologyKind
@@ -77,7 +78,7 @@ def demo(
     try:
         d.check_access(manifest_or_exit(manifest), cfg)
     except (ValueError, d.AccessControlMissingError) as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(2) from None
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:
@@ -132,9 +133,9 @@ def _run_demo(
 
             page = launch.start(stack, port, host)
             if not launch.wait_ready(page, 30):
-                console.print(
-                    f"[red]error:[/red] the dashboard did not start (port {port} "
-                    f"taken?); see {out / 'logs' / 'dashboard.log'}"
+                say_error(
+                    f"the dashboard did not start (port {port} taken?); see "
+                    f"{out / 'logs' / 'dashboard.log'}"
                 )
                 raise typer.Exit(1)
             wait_for.append(launch.TOKEN)  # sensor_sim also waits for the page: no step missed
@@ -149,11 +150,11 @@ def _run_demo(
             if rc == 0:  # its last statistics may precede its last steps by up to a second
                 bar.update(task, completed=K)
         if rc != 0:
-            console.print(f"[red]error:[/red] sensor_sim ended with {rc}; see {out / 'logs'}")
+            say_error(f"sensor_sim ended with {rc}; see {out / 'logs'}")
             raise typer.Exit(1)
         summary = d.wait_for_scored(endpoint, 1, 120, "referee")
         if summary is None:
-            console.print(f"[red]error:[/red] the scorer gave no summary; see {out / 'logs'}")
+            say_error(f"the scorer gave no summary; see {out / 'logs'}")
             raise typer.Exit(1)
         summary["access_control"] = True  # the routers enforced the ACL; every service logged in
         summary["topology"] = kind

@@ -22,6 +22,7 @@ from tltrack.app.common import (
     engine_pool,
     filter_names,
     progress_bar,
+    say_error,
 )
 
 
@@ -197,7 +198,8 @@ def _print_table(doc: dict[str, Any]) -> None:
         console.print(f"note: {doc['pcrlb_note']}")
     for name, r in doc["filters"].items():
         if r["consistency"]:
-            console.print(f"[yellow]warning:[/yellow] {name}: {r['consistency']}")
+            said = escape(f"{name}: {r['consistency']}")
+            console.print(f"[yellow]warning:[/yellow] {said}")
 
 
 @app.command()
@@ -220,13 +222,10 @@ def plot(
         cfg = Config.model_validate(doc["config"])
         _drawable(doc)
     except ValidationError as err:
-        console.print(
-            f"[red]error:[/red] cannot read {results_json}: config: "
-            f"{escape(describe_validation_error(err))}"
-        )
+        say_error(f"cannot read {results_json}: config: {describe_validation_error(err)}")
         raise typer.Exit(2) from None
     except (OSError, ValueError) as err:
-        console.print(f"[red]error:[/red] cannot read {results_json}: {escape(str(err))}")
+        say_error(f"cannot read {results_json}: {err}")
         raise typer.Exit(2) from None
     for p in draw(doc, checked_folder(out or results_json.parent), cfg):
         console.print(f"wrote {p}")

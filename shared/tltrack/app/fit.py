@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from tltrack.app.common import app, checked_file, console
+from tltrack.app.common import app, checked_file, console, say_error
 
 
 @app.command(
@@ -41,10 +41,10 @@ def fit(
     from tltrack.engine import fit as fitting
 
     if model not in fitting.PARAMETERS:
-        console.print(f"[red]error:[/red] --model: use {', '.join(fitting.PARAMETERS)}")
+        say_error(f"--model: use {', '.join(fitting.PARAMETERS)}")
         raise typer.Exit(2)
     if not (math.isfinite(Ts) and Ts > 0):
-        console.print(f"[red]error:[/red] --ts must be a finite period > 0 s, not {Ts}")
+        say_error(f"--ts must be a finite period > 0 s, not {Ts}")
         raise typer.Exit(2)
     if out is not None:
         checked_file(out)
@@ -55,7 +55,7 @@ def fit(
             xy, _origin = to_local(track)
             tracks.append(fitting.Reports(path.name, track.t - track.t[0], xy))
     except (TruthFileError, ValueError) as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(2) from None
     with console.status(f"fitting {model} to {sum(len(r.t) for r in tracks)} reports"):
         result = fitting.fit(tracks, model)  # type: ignore[arg-type]

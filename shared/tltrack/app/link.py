@@ -6,8 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 
-from tltrack.app.common import app, console
+from tltrack.app.common import app, console, say_error
 
 
 @app.command()
@@ -16,10 +17,10 @@ def link(
     listen: Annotated[
         str, typer.Option(help="where to listen, HOST:PORT (dial this instead of --to)")
     ] = "127.0.0.1:7450",
-    delay_ms: Annotated[float, typer.Option(min=0, help="delay each way")] = 0.0,
-    jitter_ms: Annotated[float, typer.Option(min=0, help="± uniform on the delay")] = 0.0,
+    delay_ms: Annotated[float, typer.Option(help="delay each way, up to an hour")] = 0.0,
+    jitter_ms: Annotated[float, typer.Option(help="± uniform on the delay")] = 0.0,
     rate_kbps: Annotated[
-        float | None, typer.Option(min=0.001, help="bandwidth cap each way (kbit/s)")
+        float | None, typer.Option(help="bandwidth cap each way (kbit/s, > 0)")
     ] = None,
     control: Annotated[
         Path | None,
@@ -41,16 +42,27 @@ def link(
     import time
 
     from tltrack.live import supervisor
-    from tltrack.live.link import LinkEmulator, Shape, apply_control, host_port, read_control
+    from tltrack.live.link import (
+        LinkEmulator,
+        Shape,
+        apply_control,
+        check_setting,
+        host_port,
+        read_control,
+    )
 
     try:
+        for name, value in (("delay_ms", delay_ms), ("jitter_ms", jitter_ms)):
+            check_setting(name, value, "--" + name.replace("_", "-"))
+        if rate_kbps is not None:
+            check_setting("rate_kbps", rate_kbps, "--rate-kbps")
         host_port(to, "--to")
         address = host_port(listen, "--listen", listen=True)
         rate = None if rate_kbps is None else rate_kbps * 1e3
         shape = Shape(delay_ms / 1e3, jitter_ms / 1e3, rate)
         emulator = LinkEmulator(to, address, shape=shape, seed=seed)
     except (ValueError, OSError) as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(2) from None
     console.print(f"link {emulator.endpoint} -> {to}: {shape}")
     seen: float | None = None
@@ -64,7 +76,7 @@ def link(
                         try:
                             apply_control(emulator, read_control(control))
                         except ValueError as err:
-                            console.print(f"[red]control ignored:[/red] {err}")
+                            console.print(f"[red]control ignored:[/red] {escape(str(err))}")
                         else:
                             state = "cut" if emulator.is_cut else emulator.shapes()["forward"]
                             console.print(f"link now: {state}")

@@ -18,6 +18,7 @@ from tltrack.app.common import (
     console,
     engine_pool,
     progress_bar,
+    say_error,
 )
 from tltrack.config import ConfigError
 
@@ -47,12 +48,12 @@ def reproduce(
     from tltrack.studies import reproduce as rep
 
     if table2_pf_only and losses_only:
-        console.print("[red]error:[/red] --table2-pf-only and --losses-only: choose one")
+        say_error("--table2-pf-only and --losses-only: choose one")
         raise typer.Exit(2)
     try:
         base = rep.base_config(preset, truth, runs, seed)
     except ConfigError as err:
-        console.print(f"[red]error:[/red] invalid configuration: {err}")
+        say_error(f"invalid configuration: {err}")
         raise typer.Exit(2) from None
     if table2_pf_only:
         todo, write = rep.table2_pf_jobs(base), rep.table2_pf_report

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from tltrack.app.access import ManifestOption, manifest_or_exit
-from tltrack.app.common import app, console, refused
+from tltrack.app.common import app, refused, say_error
 
 
 @app.command()
@@ -46,7 +46,7 @@ def router(
             try:
                 env = access.router_env(manifest_or_exit(manifest), operator, Path(tmp))
             except ManifestError as err:
-                console.print(f"[red]error:[/red] --operator: {err}")
+                say_error(f"--operator: {err}")
                 raise typer.Exit(2) from None
             for name, value in env.items():
                 os.environ.setdefault(name, value)

@@ -11,8 +11,9 @@ from pathlib import Path
 from typing import Annotated, TextIO
 
 import typer
+from rich.markup import escape
 
-from tltrack.app.common import app, console
+from tltrack.app.common import app, console, say_error
 
 
 @app.command(
@@ -47,19 +48,25 @@ def scores(
     several) in the CSV of `tltrack track`: k, filter, the state's components, the position's
     covariance.
     """
-    from tltrack.live.scores import NotAScorerFileError, open_file
+    from tltrack.live.scores import NotAScorerFileError, open_file, scored_episodes
 
     if jsonl is None and estimates is None:
-        console.print(
-            "[red]error:[/red] say what to write: --jsonl FILE, --estimates FILE, or both"
-        )
+        say_error("say what to write: --jsonl FILE, --estimates FILE, or both")
         raise typer.Exit(2)
     try:
         conn = open_file(db)
     except NotAScorerFileError as err:
-        console.print(f"[red]error:[/red] --db: {err}")
+        say_error(f"--db: {err}")
         raise typer.Exit(2) from None
     with contextlib.closing(conn):
+        try:
+            held = scored_episodes(conn)
+        except sqlite3.DatabaseError as err:
+            say_error(f"--db: {db}: {err}")
+            raise typer.Exit(2) from None
+        if episode is not None and episode not in held:  # before any file is written
+            say_error(f"--episode: {db} holds no estimate of episode {episode!r} (it has {held})")
+            raise typer.Exit(2)
         if estimates is not None:
             _write_estimates(conn, db, episode, estimates)
         if jsonl is not None:
@@ -75,10 +82,10 @@ def _write_estimates(conn: sqlite3.Connection, db: Path, episode: str | None, pa
         path.parent.mkdir(parents=True, exist_ok=True)
         write_estimates(path, scenario, rows)
     except OSError as err:
-        console.print(f"[red]error:[/red] --estimates: cannot write {path}: {err.strerror}")
+        say_error(f"--estimates: cannot write {path}: {err.strerror}")
         raise typer.Exit(2) from None
     except (sqlite3.DatabaseError, ValueError, KeyError) as err:
-        console.print(f"[red]error:[/red] --db: {db}: {err}")
+        say_error(f"--db: {db}: {err}")
         raise typer.Exit(2) from None
     console.print(f"wrote {len(rows)} estimates to {path}")
 
@@ -93,14 +100,13 @@ def _write_jsonl(conn: sqlite3.Connection, db: Path, episode: str | None, jsonl:
                 out.write(json.dumps(score.as_dict()) + "\n")
                 n += 1
     except OSError as err:
-        console.print(f"[red]error:[/red] --jsonl: cannot write {jsonl}: {err.strerror}")
+        say_error(f"--jsonl: cannot write {jsonl}: {err.strerror}")
         raise typer.Exit(2) from None
     except (sqlite3.DatabaseError, ValueError) as err:  # a damaged file, or a foreign row
-        console.print(f"[red]error:[/red] --db: {db}: unreadable at its row {n + 1}: {err}")
+        say_error(f"--db: {db}: unreadable at its row {n + 1}: {err}")
         raise typer.Exit(2) from None
     if n == 0:
-        what = f"episode {episode!r}" if episode else "any episode"
-        console.print(f"[yellow]warning:[/yellow] {db} holds no estimate of {what}")
+        console.print(f"[yellow]warning:[/yellow] {escape(str(db))} holds no estimate yet")
     console.print(f"wrote {n} lines to {'stdout' if str(jsonl) == '-' else jsonl}")
 
 

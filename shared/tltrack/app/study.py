@@ -20,6 +20,7 @@ from tltrack.app.common import (
     console,
     engine_pool,
     progress_bar,
+    say_error,
 )
 
 
@@ -96,7 +97,7 @@ def study(
         "" if realizations >= 2 else "--realizations must be at least 2",
     ]
     if any(problems):
-        console.print(f"[red]error:[/red] {'; '.join(p for p in problems if p)}")
+        say_error(f"{'; '.join(p for p in problems if p)}")
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
     configurations = {
@@ -120,7 +121,7 @@ def study(
             else:
                 path = by_name[name](setting, runner, out)
         except ValueError as err:  # a refused configuration or filter
-            console.print(f"[red]error:[/red] {err}")
+            say_error(f"{err}")
             raise typer.Exit(2) from None
     console.print(Path(path).read_text(), markup=False)
     console.print(f"wrote {path}")

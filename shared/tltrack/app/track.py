@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
+from rich.markup import escape
 
 from tltrack.app.common import (
     app,
@@ -15,6 +16,7 @@ from tltrack.app.common import (
     console,
     filter_names,
     progress_bar,
+    say_error,
 )
 
 if TYPE_CHECKING:
@@ -91,11 +93,12 @@ def track(
         recorded = read_scans(scans, {sid: setup.sensor(sid) for sid in setup.sensor_ids}, cfg.K)
         check_fit(setup, recorded)  # before the progress bar: a file refused draws none
     except (ScanFileError, ScansDoNotFitError) as err:
-        console.print(f"[red]error:[/red] {err}")
+        say_error(f"{err}")
         raise typer.Exit(2) from None
     checked_folder(out)  # before the run: a folder that cannot be written loses nothing
     for reason in recorded.refused:
-        console.print(f"[yellow]refused:[/yellow] {reason}: the filters predict through it")
+        said = escape(f"{reason}: the filters predict through it")
+        console.print(f"[yellow]refused:[/yellow] {said}")
     truth = file_truth(cfg) if cfg.truth == "file" else None
     with progress_bar(cfg.K, "steps") as bar:
         task = bar.add_task("steps", total=cfg.K)

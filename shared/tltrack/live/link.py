@@ -269,24 +269,36 @@ def read_control(path: Path) -> dict[str, Any]:
     for name in ("delay_ms", "jitter_ms", "rate_kbps"):
         if name not in raw or (raw[name] is None and name == "rate_kbps"):
             continue
-        value = raw[name]
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"{path}: {name} must be a number")
-        rate = name == "rate_kbps"  # a cap of 0 would stall the link for good
         try:
-            ok = math.isfinite(value) and (value > 0 if rate else 0 <= value <= MOST_DELAY_MS)
-        except OverflowError:  # an integer of hundreds of digits
-            ok = False
-        if not ok:
-            want = "finite and > 0" if rate else f"in [0, {MOST_DELAY_MS:.0f}]"
-            raise ValueError(f"{path}: {name} must be {want}")
+            check_setting(name, raw[name])
+        except ValueError as err:
+            raise ValueError(f"{path}: {err}") from None
     return raw
+
+
+def check_setting(name: str, value: Any, label: str | None = None) -> None:
+    """``ValueError`` (naming ``label``, else ``name``) unless ``value`` is one that ``delay_ms``,
+    ``jitter_ms`` or ``rate_kbps`` may take: the control file's and the command line's limits."""
+    label = label or name
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{label} must be a number")
+    rate = name == "rate_kbps"  # a cap of 0 would stall the link for good
+    try:
+        ok = math.isfinite(value) and (value > 0 if rate else 0 <= value <= MOST_DELAY_MS)
+    except OverflowError:  # an integer of hundreds of digits
+        ok = False
+    if not ok:
+        want = "finite and > 0" if rate else f"in [0, {MOST_DELAY_MS:.0f}]"
+        raise ValueError(f"{label} must be {want}, not {value}")
 
 
 def host_port(text: str, option: str, *, listen: bool = False) -> tuple[str, int]:
     """``[tcp/]HOST:PORT`` as (host, port), or ``ValueError`` naming ``option``. Where to
     ``listen``, the host may be left out (127.0.0.1) and the port may be 0 (any free one)."""
-    host, sep, port = text.split("/", 1)[-1].rpartition(":")
+    protocol, slash, address = text.rpartition("/")
+    if slash and protocol != "tcp":
+        raise ValueError(f"{option} {text!r}: the link relays TCP only (tcp/HOST:PORT)")
+    host, sep, port = address.rpartition(":")
     low = 0 if listen else 1
     if not (sep and (host or listen) and port.isdigit() and low <= int(port) <= 65535):
         raise ValueError(f"{option} {text!r}: HOST:PORT with a port in {low}..65535")

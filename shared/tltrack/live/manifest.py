@@ -71,6 +71,10 @@ class Operator:
         return None if self.role == "referee" else f"router-{self.router}"
 
 
+def _folded(source_id: str) -> str:
+    return source_id.lower().replace("-", "_")
+
+
 class Manifest(BaseModel):
     """The source operators of a deployment (the referee and the primary are implied)."""
 
@@ -83,6 +87,11 @@ class Manifest(BaseModel):
         ids = [s.id for s in self.sources]
         if len(set(ids)) != len(ids):
             raise ValueError(f"sources: an id appears twice in {ids}")
+        # a password variable (TLTRACK_PASSWORD_SOURCE_S_1) and a host name are blind to case
+        # and to - against _: two ids they cannot tell apart would share them
+        alike = [i for i in ids if [_folded(j) for j in ids].count(_folded(i)) > 1]
+        if alike:
+            raise ValueError(f"sources: {alike} differ only in case or in - against _")
         return self
 
     @property
@@ -141,6 +150,8 @@ def load_manifest(path: str | Path | None = None) -> Manifest:
         data = tomllib.loads(where.read_text())
     except OSError as err:
         raise ManifestError(f"cannot read the operator manifest {where}: {err.strerror}") from None
+    except UnicodeDecodeError:
+        raise ManifestError(f"{where}: not UTF-8 text (a manifest is TOML)") from None
     except tomllib.TOMLDecodeError as err:
         raise ManifestError(f"{where}: not valid TOML: {err}") from None
     try:

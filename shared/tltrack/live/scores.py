@@ -49,10 +49,12 @@ def squared_error(pos: Sequence[float], truth: Sequence[float]) -> float:
 
 def _position(text: str) -> list[float]:
     """A stored position, or ValueError: a damaged or foreign row must not end in a traceback."""
-    pos = json.loads(text)
-    numbers = isinstance(pos, list) and all(isinstance(v, int | float) for v in pos)
+    pos = json.loads(text)  # takes NaN and Infinity, which no message carries
+    numbers = isinstance(pos, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in pos
+    )
     if not (numbers and len(pos) == 2):
-        raise ValueError(f"a position is two numbers, not {text[:40]!r}")
+        raise ValueError(f"a position is two finite numbers, not {text[:40]!r}")
     return pos
 
 
@@ -73,6 +75,8 @@ class StepScore:
 
 def open_file(path: Path) -> sqlite3.Connection:
     """The scorer's file at ``path``, read-only; :class:`NotAScorerFileError` otherwise."""
+    if path.is_dir():
+        raise NotAScorerFileError(f"{path}: a folder, not the scorer's file")
     if not path.is_file():
         raise NotAScorerFileError(f"{path}: no such file")
     try:
@@ -88,6 +92,15 @@ def open_file(path: Path) -> sqlite3.Connection:
             "where TLTRACK_SCORER_DB says, `tltrack demo` in out/demo/scorer.sqlite"
         )
     return db
+
+
+def scored_episodes(db: sqlite3.Connection) -> list[str]:
+    """The episodes the file holds estimates of, in the order they started."""
+    rows = db.execute(
+        "SELECT e.episode FROM estimates e LEFT JOIN episodes s ON s.episode = e.episode"
+        " GROUP BY e.episode ORDER BY min(s.started), e.episode"
+    )
+    return [e for (e,) in rows]
 
 
 def step_scores(db: sqlite3.Connection, episode: str | None = None) -> Iterator[StepScore]:
