@@ -23,6 +23,12 @@ from tltrack.app.common import (
     say_error,
 )
 
+#: study realizations' defaults
+REALIZATIONS = 100
+REALIZATION_FILTERS = "pf,tl-pf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5"
+#: study manoeuvres' tracks
+TRACKS = Path("examples/tracks")
+
 
 @app.command(
     epilog="Examples:\n\n    tltrack study robust --runs 200\n\n"
@@ -56,13 +62,17 @@ def study(
     particles: Annotated[
         int | None, typer.Option(min=10, help="particles per PF (default: the study's own)")
     ] = None,
-    realizations: Annotated[int, typer.Option(help="realizations (study realizations)")] = 100,
+    realizations: Annotated[
+        int | None, typer.Option(help="study realizations: how many [100]")
+    ] = None,
     filters: Annotated[
-        str, typer.Option(help="filters (study realizations)")
-    ] = "pf,tl-pf,ukf,tl-ukf,ckf3,tl-ckf3,ckf5,tl-ckf5",
+        str | None,
+        typer.Option(help=f"study realizations: the filters [{REALIZATION_FILTERS}]"),
+    ] = None,
     tracks: Annotated[
-        Path, typer.Option(help="the recorded tracks' folder (study manoeuvres)")
-    ] = Path("examples/tracks"),
+        Path | None,
+        typer.Option(help="study manoeuvres: the recorded tracks' folder [examples/tracks]"),
+    ] = None,
     workers: Workers = None,
     batch_size: BatchSize = None,
     scheduler: Scheduler = None,
@@ -85,7 +95,7 @@ def study(
         "heterogeneous": studies.heterogeneous,
         "presets": studies.presets,
         "intensities": studies.intensities,
-        "manoeuvres": functools.partial(studies.manoeuvres, tracks=tracks),
+        "manoeuvres": functools.partial(studies.manoeuvres, tracks=tracks or TRACKS),
         "clutter": studies.clutter,
         "links": studies.links,
     }
@@ -94,14 +104,23 @@ def study(
         "" if name in known else f"unknown study {name!r}; use {', '.join(known)}",
         "" if known_kind(kind) else f"--kind: unknown kind {kind!r}",
         "" if known_kind(source_filter) else f"--source-filter: unknown {source_filter!r}",
-        "" if realizations >= 2 else "--realizations must be at least 2",
+        "" if realizations is None or realizations >= 2 else "--realizations must be at least 2",
+        *(
+            f"{option} is an option of study {owner}, not of {name}"
+            for option, owner, given in (
+                ("--realizations", "realizations", realizations),
+                ("--filters", "realizations", filters),
+                ("--tracks", "manoeuvres", tracks),
+            )
+            if given is not None and name != owner and name in known
+        ),
     ]
     if any(problems):
         say_error(f"{'; '.join(p for p in problems if p)}")
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
     configurations = {
-        "realizations": realizations,
+        "realizations": realizations or REALIZATIONS,
         "manoeuvres": studies.MANOEUVRE_CONFIGS,
         "clutter": studies.CLUTTER_SWEEPS,
         "links": len(studies.link_cells()),
@@ -116,8 +135,10 @@ def study(
         )
         try:
             if name == "realizations":
-                names = [f.strip() for f in filters.split(",") if f.strip()]
-                path = studies.realizations(setting, runner, out, count=realizations, filters=names)
+                listed = filters or REALIZATION_FILTERS
+                names = [f.strip() for f in listed.split(",") if f.strip()]
+                count = realizations or REALIZATIONS
+                path = studies.realizations(setting, runner, out, count=count, filters=names)
             else:
                 path = by_name[name](setting, runner, out)
         except ValueError as err:  # a refused configuration or filter
