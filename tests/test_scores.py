@@ -216,6 +216,11 @@ def test_an_episodes_estimates_as_tltrack_tracks_csv(tmp_path: Path) -> None:
     write_estimates(want, "ct", rows)
     assert out.read_text() == want.read_text()
     assert scores("--db", str(db)).exit_code == 2  # nothing asked for
+    with sqlite3.connect(db) as con:  # a foreign row: it printed a KeyError's "'scenario'"
+        con.execute("UPDATE episodes SET config = '{}' WHERE episode = 'ep-a'")
+    r = scores("--db", str(db), "--episode", "ep-a", "--estimates", str(out))
+    said = " ".join(r.output.split())
+    assert r.exit_code == 2 and "'ep-a': its config names no motion model (scenario)" in said
 
 
 def test_jsonl_to_a_device_is_written_through(tmp_path: Path) -> None:

@@ -136,7 +136,10 @@ def estimates(db: sqlite3.Connection, episode: str | None = None) -> tuple[str, 
     row = db.execute("SELECT config FROM episodes WHERE episode = ?", (episode,)).fetchone()
     if row is None:
         raise ValueError(f"no episode {episode!r} (held: {held})")
-    scenario = json.loads(row[0])["scenario"]
+    config = json.loads(row[0])
+    scenario = config.get("scenario") if isinstance(config, dict) else None
+    if not isinstance(scenario, str):
+        raise ValueError(f"episode {episode!r}: its config names no motion model (scenario)")
     n_x = len(MOTIONS.get(scenario).components)
     out: list[Estimated] = []
     query = "SELECT k, filter, x, P FROM estimates WHERE episode = ? ORDER BY k, filter"
