@@ -372,3 +372,14 @@ def test_plot_draws_a_series_with_a_gap(tmp_path, small_results):
     (tmp_path / "results.json").write_text(json.dumps(doc))
     r = runner.invoke(app, ["plot", str(tmp_path / "results.json")])
     assert r.exit_code == 0 and (tmp_path / "rmse.png").stat().st_size > 10_000, r.output
+
+
+def test_a_warning_reads_as_one_line(monkeypatch):
+    """A checkpoint read from another machine warned with Python's file, line and source line,
+    which read like a crash in a long job's log."""
+    import warnings
+
+    monkeypatch.setattr(warnings, "formatwarning", warnings.formatwarning)
+    assert runner.invoke(app, ["access", "show"]).exit_code == 0
+    said = warnings.formatwarning("a prefix made elsewhere", UserWarning, "/x/montecarlo.py", 563)
+    assert said == "warning: a prefix made elsewhere\n"

@@ -3,6 +3,7 @@ and the configuration built from a file and the options."""
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterator
 from concurrent.futures import Executor
 from contextlib import contextmanager
@@ -33,6 +34,22 @@ app = typer.Typer(
     rich_markup_mode="markdown",
 )
 console = Console(stderr=True)
+
+
+@app.callback()
+def _plain_warnings() -> None:
+    """A warning reads as one line to the user, not as Python's file, line and source."""
+    warnings.formatwarning = _one_line
+
+
+def _one_line(
+    message: Warning | str,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    line: str | None = None,
+) -> str:
+    return f"warning: {message}\n"
 
 
 def refused(err: ValueError) -> typer.Exit:
