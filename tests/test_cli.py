@@ -400,3 +400,14 @@ def test_every_committed_results_file_can_be_plotted_again():
         doc = read(path)
         Config.model_validate(doc["config"])
         _drawable(doc)
+
+
+@pytest.mark.parametrize(
+    ("flag", "says"),
+    [("--steps", "K: Input should be greater than or equal to 1"), ("--particles", "particles:")],
+)
+def test_demo_refuses_zero_steps_or_particles_before_starting_anything(tmp_path, flag, says):
+    """`steps or 100` took 0 for no value: the demo ran 100 steps of 6000 particles."""
+    r = runner.invoke(app, ["demo", flag, "0", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
+    assert not (tmp_path / "logs").exists()

@@ -102,3 +102,41 @@ def test_what_a_sensor_would_wait_on_or_fail_at_is_refused_at_start(
     with pytest.raises(SystemExit) as stop:
         load_settings(_settings(module), [flag])
     assert stop.value.code == 2 and said in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("module", "env", "said"),
+    [
+        ("sensor_sim", {"TLTRACK_SIM_WAIT_FOR": "[bad"}, 'field "wait_for"'),
+        ("sensor", {"TLTRACK_SENSOR_ZENOH": "{bad"}, 'field "zenoh"'),
+    ],
+)
+def test_a_value_that_is_not_its_json_is_refused_not_a_traceback(
+    module: str, env: dict[str, str], said: str, monkeypatch: pytest.MonkeyPatch, capsys
+) -> None:
+    """pydantic-settings raised SettingsError, which load_settings let through."""
+    names = {"sensor_sim": "sensor_sim.simulator", "sensor": "sensor.sensor"}
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    with pytest.raises(SystemExit) as stop:
+        load_settings(_settings(f"tltrack.services.{names[module]}"), [])
+    assert stop.value.code == 2 and said in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("db", ["folder", "garbage.sqlite", "missing/folder/x.sqlite"])
+def test_the_scorer_refuses_a_db_it_cannot_write_at_start(tmp_path, db: str) -> None:
+    """Each was a traceback (sqlite3's, or FileNotFoundError's)."""
+    import subprocess
+    import sys
+
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "garbage.sqlite").write_bytes(bytes(range(256)) * 8)
+    (tmp_path / "missing").write_text("a file where a folder should be")
+    r = subprocess.run(
+        [sys.executable, "-m", "tltrack.services.scorer", "--db", str(tmp_path / db)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2 and "no SQLite file the scorer can write" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr

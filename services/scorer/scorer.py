@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sqlite3
 import sys
 import threading
 import time
@@ -214,7 +215,12 @@ def main(argv: list[str] | None = None) -> None:
     # it. At Python's default 5 ms switch interval, a main thread busy in Python made each
     # arrival wait up to 5 ms, and a burst of them queue: 0.5 ms keeps the stamps exact.
     sys.setswitchinterval(5e-4)
-    store = Store(settings.db)
+    try:
+        store = Store(settings.db)
+    except (OSError, sqlite3.Error) as err:  # a folder, a foreign file, an unwritable path
+        said = f"error: db {settings.db}: no SQLite file the scorer can write: {err}"
+        print(said, file=sys.stderr)
+        raise SystemExit(2) from None
     try:
         with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
             scorer = Scorer(settings, svc, store)

@@ -70,7 +70,9 @@ def demo(
 
     if config is None:
         preset, truth = preset or "arasaratnam-haykin", truth or "fixed"
-        steps, particles, seed = steps or 100, particles or 6000, seed or 0
+        steps = 100 if steps is None else steps  # 0 is the config's to refuse, not a default
+        particles = 6000 if particles is None else particles
+        seed = 0 if seed is None else seed
     cfg = build_config(config, preset=preset, truth=truth, K=steps, particles=particles, seed=seed)
     checked_folder(out)
     if json_out:

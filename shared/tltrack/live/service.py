@@ -23,7 +23,7 @@ from typing import Annotated, Any, Literal, TypeVar
 
 import zenoh
 from pydantic import BeforeValidator, Field, ValidationError
-from pydantic_settings import BaseSettings
+from pydantic_settings import BaseSettings, SettingsError
 from tltrack.config import describe_validation_error, plugins
 from tltrack.live.supervisor import exit_unless_stopped
 from tltrack.wire import keys
@@ -74,6 +74,10 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
             f"error: invalid settings for {cls.__name__}: {describe_validation_error(err)}",
             file=sys.stderr,
         )
+        raise SystemExit(2) from None
+    except SettingsError as err:  # a value that is not the JSON its field needs ('[bad')
+        cause = f": {err.__cause__}" if err.__cause__ else ""
+        print(f"error: invalid settings for {cls.__name__}: {err}{cause}", file=sys.stderr)
         raise SystemExit(2) from None
 
 
