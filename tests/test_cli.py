@@ -411,3 +411,18 @@ def test_demo_refuses_zero_steps_or_particles_before_starting_anything(tmp_path,
     r = runner.invoke(app, ["demo", flag, "0", "--out", str(tmp_path)])
     assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
     assert not (tmp_path / "logs").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["bench", "--particles", "20000000"], "particles: Input should be less than or equal"),
+        (["bench", "--clutter", "--steps", "200000"], "K: Input should be less than or equal"),
+        (["bench-live", "--rates=-5,nan,0"], "--rates: steps per second, each finite and > 0"),
+        (["bench-live", "--particles", "20000000"], "particles: Input should be less than"),
+    ],
+)
+def test_the_benches_refuse_what_the_config_would_before_any_work(args, says):
+    """Tracebacks (a ConfigError) or, for the rates, a live stack started on them."""
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output

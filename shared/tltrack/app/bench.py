@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
@@ -10,6 +11,7 @@ import typer
 
 from tltrack.app.common import (
     app,
+    build_config,
     checked_file,
     console,
     say_error,
@@ -59,6 +61,10 @@ def bench_live(
     except ValueError:
         say_error(f"--rates: not a list of numbers: {rates!r}")
         raise typer.Exit(2) from None
+    if not all(math.isfinite(r) and r > 0 for r in ladder):
+        say_error(f"--rates: steps per second, each finite and > 0, not {rates!r}")
+        raise typer.Exit(2)
+    build_config(None, particles=particles)  # the bounds the services will hold it to
     try:
         with stop_on_signals():
             result = livebench.run(
@@ -93,6 +99,7 @@ def bench(
     """
     if json_out:
         checked_file(json_out, "--json")
+    build_config(None, particles=particles, **({"K": steps} if clutter else {}))
     if clutter:
         from tltrack.perf.clutter import format_clutter_table, run_clutter_bench
 
