@@ -92,6 +92,9 @@ def test_run_router_refuses_a_bad_endpoint_before_opening_a_session() -> None:
         ("tltrack.services.sensor_sim.simulator", '--wait_for=["a:scorer"]', "operator 'a'"),
         ("tltrack.services.sensor_sim.simulator", '--wait_for=["primary:b c"]', "name 'b c'"),
         ("tltrack.services.sensor.sensor", "--replay_csv=/nonexistent.csv", "does not point"),
+        ("tltrack.services.sensor_sim.simulator", "--replay_csv=/nonexistent.csv", "does not"),
+        ("tltrack.services.sensor_sim.simulator", "--wait_timeout_s=inf", "less than or equal"),
+        ("tltrack.services.sensor_sim.simulator", "--linger_s=1e12", "less than or equal"),
     ],
 )
 def test_what_a_sensor_would_wait_on_or_fail_at_is_refused_at_start(
@@ -140,3 +143,13 @@ def test_the_scorer_refuses_a_db_it_cannot_write_at_start(tmp_path, db: str) -> 
     )
     assert r.returncode == 2 and "no SQLite file the scorer can write" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_sensor_sim_refuses_a_replay_its_sensors_would_make_at_start(tmp_path, capsys) -> None:
+    """Refused once a router had answered: without one, it waited for ever."""
+    rows = tmp_path / "rows.csv"
+    rows.write_text("k,sensor,range_m,bearing_rad\n1,primary,100,0.1\n")
+    settings = _settings("tltrack.services.sensor_sim.simulator")
+    with pytest.raises(SystemExit) as stop:
+        load_settings(settings, [f"--replay_csv={rows}", "--measurements=false"])
+    assert stop.value.code == 2 and "each operator's sensor replays" in capsys.readouterr().err

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import Field, field_validator
+from pydantic import Field, FilePath, field_validator, model_validator
 from pydantic_settings import SettingsConfigDict
 from tltrack.config import Config, load_config
 from tltrack.engine.scenario import Run, simulate
@@ -61,7 +61,7 @@ class Settings(ServiceSettings):
         0.5, ge=0, le=60, description="wait from an episode's start to its first tick"
     )
     realtime: bool = Field(False, description="pace at one tick of the truth grid per its period")
-    replay_csv: Path | None = Field(None, description="publish recorded measurements instead")
+    replay_csv: FilePath | None = Field(None, description="publish recorded measurements instead")
     measurements: bool = Field(
         True, description="publish every sensor's measurements (false: each operator's sensor)"
     )
@@ -73,8 +73,20 @@ class Settings(ServiceSettings):
         ],
         description="operator:service tokens to await before starting",
     )
-    wait_timeout_s: float = Field(60.0, gt=0)
-    linger_s: float = Field(1.0, ge=0, description="wait before closing, so the link drains")
+    #: a day at most: a longer wait overflows the clock's deadline (inf crashed the wait)
+    wait_timeout_s: float = Field(60.0, gt=0, le=86_400)
+    linger_s: float = Field(
+        1.0, ge=0, le=3600, description="wait before closing, so the link drains"
+    )
+
+    @model_validator(mode="after")
+    def _replay(self) -> Settings:
+        if self.replay_csv and not self.measurements:
+            raise ValueError(
+                "with --measurements false each operator's sensor replays its own rows "
+                "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
+            )
+        return self
 
     @field_validator("wait_for")
     @classmethod
@@ -112,16 +124,6 @@ class Simulator:
             log.warning(
                 "sources %s: a config's link is the engine's model; live, the real link applies",
                 ", ".join(modelled),
-            )
-        if settings.replay_csv and not settings.measurements:
-            raise replay.ReplayError(
-                "with --measurements false each operator's sensor replays its own rows "
-                "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
-            )
-        if settings.replay_csv and not cfg.timeline.synchronous:
-            raise replay.ReplayError(
-                "a replayed file's step k is every sensor's, on one clock; the config gives an "
-                "operator its own period_s, phase_s or clock_offset_s"
             )
         self.recorded = (
             replay.load(settings.replay_csv, setup, self.sensors) if settings.replay_csv else None
@@ -252,6 +254,12 @@ def main(argv: list[str] | None = None) -> None:
     except ValueError as err:  # a ConfigError, or a truth file refused
         log.error("invalid configuration: %s", err)
         raise SystemExit(2) from None
+    if settings.replay_csv and not cfg.timeline.synchronous:
+        log.error(
+            "a replayed file's step k is every sensor's, on one clock; the config gives an "
+            "operator its own period_s, phase_s or clock_offset_s"
+        )
+        raise SystemExit(2)
     with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
         svc.announce()
         try:
