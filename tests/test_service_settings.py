@@ -153,3 +153,42 @@ def test_sensor_sim_refuses_a_replay_its_sensors_would_make_at_start(tmp_path, c
     with pytest.raises(SystemExit) as stop:
         load_settings(settings, [f"--replay_csv={rows}", "--measurements=false"])
     assert stop.value.code == 2 and "each operator's sensor replays" in capsys.readouterr().err
+
+
+def test_a_router_on_a_port_in_use_says_so() -> None:
+    """zenoh's refusal was a traceback."""
+    import socket
+
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = held.getsockname()[1]
+        r = CliRunner().invoke(app, ["router", "--listen", f"tcp/127.0.0.1:{port}"])
+    said = " ".join(r.output.split())
+    assert r.exit_code == 1 and "the router did not start" in said, r.output
+    assert "Address already in use" in said and ".rs:" not in said
+
+
+def test_a_service_that_finds_no_router_in_time_says_so(tmp_path) -> None:
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    env = {
+        **os.environ,
+        "TLTRACK_ZENOH_ENDPOINTS": f"tcp/127.0.0.1:{port}",
+        "TLTRACK_ZENOH_CONNECT_TIMEOUT_MS": "300",
+    }
+    r = subprocess.run(
+        [sys.executable, "-m", "tltrack.services.scorer", "--db", str(tmp_path / "s.sqlite")],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert r.returncode == 1 and "scorer: no zenoh session with" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and "Unable to connect" in r.stderr

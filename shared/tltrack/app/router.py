@@ -36,10 +36,12 @@ def router(
     import os
     import tempfile
 
+    import zenoh
+
     from tltrack.live import access
     from tltrack.live.manifest import ManifestError
     from tltrack.live.router import router_settings, run_router
-    from tltrack.wire.transport import ZenohSettings
+    from tltrack.wire.transport import ZenohSettings, refusal
 
     with tempfile.TemporaryDirectory(prefix="tltrack-router-") as tmp:
         if operator is not None:
@@ -55,4 +57,8 @@ def router(
             settings = router_settings(listen, ZenohSettings(), connect)
         except ValueError as err:  # TLTRACK_ZENOH_*, --listen, --connect
             raise refused(err) from None
-        run_router(listen, settings, connect=connect)
+        try:
+            run_router(listen, settings, connect=connect)
+        except zenoh.ZError as err:  # a port in use, a certificate zenoh cannot read
+            say_error(f"the router did not start on {', '.join(listen)}: {refusal(err)}")
+            raise typer.Exit(1) from None

@@ -36,6 +36,7 @@ from tltrack.wire.transport import (
     declare_token,
     open_session,
     query,
+    refusal,
 )
 
 log = logging.getLogger(__name__)
@@ -112,7 +113,12 @@ class Service:
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, signal.SIG_DFL)
         self._exit = contextlib.ExitStack()
-        self.session: zenoh.Session = self._exit.enter_context(open_session(self._zenoh))
+        try:
+            self.session: zenoh.Session = self._exit.enter_context(open_session(self._zenoh))
+        except zenoh.ZError as err:  # no router within connect_timeout_ms, a TLS file zenoh refuses
+            where = ", ".join(self._zenoh.endpoints)
+            log.error("%s: no zenoh session with %s: %s", self.name, where, refusal(err))
+            raise SystemExit(1) from None
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, self._on_signal)
         self._stats_pub = Publisher(self.session, keys.stats(self.operator, self.name))

@@ -81,10 +81,11 @@ def check_endpoint(endpoint: str) -> str:
     return endpoint
 
 
-def _refusal(err: zenoh.ZError) -> str:
+def refusal(err: zenoh.ZError) -> str:
     """What zenoh says of a configuration it refuses, without the Rust source locations."""
     said = re.search(r'msg: "(.*?)(?: at /[^"]*)?"', str(err))
     text = said.group(1).replace("\\n", " ") if said else str(err)
+    text = re.sub(r"\s+at /\S+\.rs:\d+\.?", "", text)  # zenoh's own source, line by line
     return f"zenoh refuses it: {' '.join(text.split())}"
 
 
@@ -151,7 +152,7 @@ class ZenohSettings(BaseSettings):
         try:  # what zenoh alone knows to refuse (an access control file it cannot parse)
             self.to_config()
         except zenoh.ZError as err:
-            raise ValueError(_refusal(err)) from None
+            raise ValueError(refusal(err)) from None
         return self
 
     def entries(self) -> list[tuple[str, str]]:
