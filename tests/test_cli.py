@@ -426,3 +426,18 @@ def test_the_benches_refuse_what_the_config_would_before_any_work(args, says):
     """Tracebacks (a ConfigError) or, for the rates, a live stack started on them."""
     r = runner.invoke(app, args)
     assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
+
+
+def test_demo_serve_refuses_a_host_or_port_the_dashboard_cannot_listen_on(tmp_path):
+    """Found only after every router and service had started: a traceback, or a 30 s wait."""
+    import socket
+
+    r = runner.invoke(app, ["demo", "--serve", "--host", "bad host", "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "the dashboard cannot listen there" in " ".join(r.output.split())
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = str(held.getsockname()[1])
+        r = runner.invoke(app, ["demo", "--serve", "--port", port, "--out", str(tmp_path)])
+    assert r.exit_code == 2 and "Address already in use" in " ".join(r.output.split()), r.output
+    assert not (tmp_path / "logs").exists()

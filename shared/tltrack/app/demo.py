@@ -77,6 +77,8 @@ def demo(
     checked_folder(out)
     if json_out:
         checked_file(json_out, "--json")
+    if serve:
+        _check_can_serve(host, port)
     try:
         d.check_access(manifest_or_exit(manifest), cfg)
     except (ValueError, d.AccessControlMissingError) as err:
@@ -170,3 +172,18 @@ def _run_demo(
                 "(Prometheus metrics at /metrics)"
             )
     return summary
+
+
+def _check_can_serve(host: str, port: int) -> None:
+    """Exit 2 unless the dashboard could listen on host:port: found out only after the whole
+    stack had started (a host with a space was a traceback, a taken port a 30 s wait)."""
+    import socket
+
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind(address)
+    except (OSError, UnicodeError) as err:  # socket.gaierror is an OSError
+        say_error(f"--host {host!r} --port {port}: the dashboard cannot listen there: {err}")
+        raise typer.Exit(2) from None
