@@ -192,3 +192,20 @@ def test_a_service_that_finds_no_router_in_time_says_so(tmp_path) -> None:
     )
     assert r.returncode == 1 and "scorer: no zenoh session with" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and "Unable to connect" in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("module", "args"),
+    [
+        ("tltrack.services.sensor.sensor", ["--sensor", ""]),
+        ("tltrack.services.source_tracker.tracker", ["--source_id="]),
+        ("tltrack.services.sensor_sim.simulator", ["--config", ""]),
+    ],
+)
+def test_an_empty_flag_is_refused_not_read_as_its_default(
+    module: str, args: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The settings drop an empty value: `--sensor ''` ran as the default sensor in silence."""
+    with pytest.raises(SystemExit) as stop:
+        load_settings(_settings(module), args)
+    assert stop.value.code == 2 and "given an empty value" in capsys.readouterr().err

@@ -68,8 +68,16 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2) from None
+    args = sys.argv[1:] if argv is None else argv
+    if empty := _empty_flags(args):
+        print(
+            f"error: invalid settings for {cls.__name__}: {', '.join(empty)} given an empty "
+            "value (leave a flag out for its default)",
+            file=sys.stderr,
+        )
+        raise SystemExit(2)
     try:
-        return cls(_cli_parse_args=sys.argv[1:] if argv is None else argv)
+        return cls(_cli_parse_args=args)
     except ValidationError as err:
         print(
             f"error: invalid settings for {cls.__name__}: {describe_validation_error(err)}",
@@ -80,6 +88,19 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
         cause = f": {err.__cause__}" if err.__cause__ else ""
         print(f"error: invalid settings for {cls.__name__}: {err}{cause}", file=sys.stderr)
         raise SystemExit(2) from None
+
+
+def _empty_flags(args: list[str]) -> list[str]:
+    """The flags given ``''``: the settings drop an empty value, as they do an empty variable
+    of the environment, and would run on the default in silence."""
+    empty = []
+    for i, arg in enumerate(args):
+        flag, eq, value = arg.partition("=")
+        if not flag.startswith("--"):
+            continue
+        if (eq and not value) or (not eq and i + 1 < len(args) and args[i + 1] == ""):
+            empty.append(flag)
+    return empty
 
 
 def setup_logging(level: LogLevel = "INFO") -> None:
