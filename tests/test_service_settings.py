@@ -209,3 +209,26 @@ def test_an_empty_flag_is_refused_not_read_as_its_default(
     with pytest.raises(SystemExit) as stop:
         load_settings(_settings(module), args)
     assert stop.value.code == 2 and "given an empty value" in capsys.readouterr().err
+
+
+def test_a_misspelt_variable_is_named_not_ignored_in_silence(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("TLTRACK_SENSOR_SENSORR", "s1")
+    monkeypatch.setenv("TLTRACK_ZENOH_LEASE", "3000")
+    monkeypatch.setenv("TLTRACK_ZENOH_LEASE_MS", "3000")  # a setting: not named
+    load_settings(_settings("tltrack.services.sensor.sensor"), [])
+    said = capsys.readouterr().err
+    assert "TLTRACK_SENSOR_SENSORR is no setting of this service" in said
+    assert "TLTRACK_ZENOH_LEASE is no setting" in said and "LEASE_MS" not in said
+
+
+def test_a_plugin_that_fails_to_import_is_refused_not_a_traceback(
+    tmp_path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "broken_plugin.py").write_text("raise RuntimeError('half-installed')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("TLTRACK_PLUGINS", "sensor=broken_plugin:Radar")
+    with pytest.raises(SystemExit) as stop:
+        load_settings(_settings("tltrack.services.sensor.sensor"), [])
+    assert stop.value.code == 2 and "half-installed" in capsys.readouterr().err

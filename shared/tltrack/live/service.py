@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -68,6 +69,11 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
     except ValueError as err:
         print(f"error: {err}", file=sys.stderr)
         raise SystemExit(2) from None
+    except Exception as err:  # a plugin module that fails as it is imported
+        print(f"error: a plugin (TLTRACK_PLUGINS) failed to import: {err!r}", file=sys.stderr)
+        raise SystemExit(2) from None
+    for name in _unknown_variables(cls):
+        print(f"warning: {name} is no setting of this service; ignored", file=sys.stderr)
     args = sys.argv[1:] if argv is None else argv
     if empty := _empty_flags(args):
         print(
@@ -88,6 +94,18 @@ def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
         cause = f": {err.__cause__}" if err.__cause__ else ""
         print(f"error: invalid settings for {cls.__name__}: {err}{cause}", file=sys.stderr)
         raise SystemExit(2) from None
+
+
+def _unknown_variables(cls: type[BaseSettings]) -> list[str]:
+    """The environment's variables under the prefix of ``cls`` or of its zenoh settings that
+    name no field: a misspelt one would be ignored in silence."""
+    unknown: set[str] = set()
+    for settings in (cls, ZenohSettings):
+        prefix = str(settings.model_config.get("env_prefix") or "").upper()
+        known = {prefix + name.upper() for name in settings.model_fields}
+        if prefix:
+            unknown |= {v for v in os.environ if v.upper().startswith(prefix)} - known
+    return sorted(unknown)
 
 
 def _empty_flags(args: list[str]) -> list[str]:
