@@ -196,7 +196,12 @@ class ZenohSettings(BaseSettings):
         if any(e.startswith("tls/") for e in self.endpoints) or self.tls_root_ca is not None:
             put(f"{tls}/verify_name_on_connect", self.tls_verify_name)
         if self.access_control_file is not None:
-            out.append(("access_control", self.access_control_file.read_text()))
+            try:
+                out.append(("access_control", self.access_control_file.read_text()))
+            except UnicodeDecodeError:
+                raise ValueError(
+                    f"access_control_file {self.access_control_file}: not UTF-8 text (JSON5)"
+                ) from None
         return out
 
     def to_config(self) -> zenoh.Config:
