@@ -451,4 +451,13 @@ def test_a_taken_port_stops_the_dashboard_at_once_with_the_reason(tmp_path):
             env={**os.environ, "TLTRACK_ZENOH_ENDPOINTS": "tcp/127.0.0.1:1"},
         )
     assert r.returncode == 2, r.stderr
-    assert f"cannot serve on 127.0.0.1:{port}" in r.stderr
+    assert f"cannot serve on host '127.0.0.1', port {port}: " in r.stderr
+    assert "Address already in use" in r.stderr  # the reason, not a guess at it
+    r = subprocess.run(
+        [sys.executable, "-m", "tltrack.services.dashboard", "--host=bad host"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert r.returncode == 2 and "cannot serve on host 'bad host'" in r.stderr, r.stderr
+    assert "port in use" not in r.stderr

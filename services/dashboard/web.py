@@ -17,6 +17,7 @@ from fastapi import FastAPI, Query
 from fastapi.responses import FileResponse, Response
 from fastapi.staticfiles import StaticFiles
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from tltrack.live.topology import why_cannot_listen
 from tltrack.services.dashboard.metrics import Metrics
 from tltrack.services.dashboard.state import State
 
@@ -69,6 +70,8 @@ class WebServer:
         self._thread = threading.Thread(target=self.server.run, name="dashboard-http", daemon=True)
 
     def start(self, timeout: float = 15.0) -> None:
+        if why := why_cannot_listen(self.host, self.port):  # uvicorn's thread would hide it
+            raise RuntimeError(f"cannot serve on host {self.host!r}, port {self.port}: {why}")
         self._thread.start()
         deadline = time.monotonic() + timeout
         while not self.server.started:

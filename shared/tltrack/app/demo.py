@@ -177,13 +177,8 @@ def _run_demo(
 def _check_can_serve(host: str, port: int) -> None:
     """Exit 2 unless the dashboard could listen on host:port: found out only after the whole
     stack had started (a host with a space was a traceback, a taken port a 30 s wait)."""
-    import socket
+    from tltrack.live.topology import why_cannot_listen
 
-    try:
-        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
-        with socket.socket(family, kind, proto) as probe:
-            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            probe.bind(address)
-    except (OSError, UnicodeError) as err:  # socket.gaierror is an OSError
-        say_error(f"--host {host!r} --port {port}: the dashboard cannot listen there: {err}")
-        raise typer.Exit(2) from None
+    if why := why_cannot_listen(host, port):
+        say_error(f"--host {host!r} --port {port}: the dashboard cannot listen there: {why}")
+        raise typer.Exit(2)

@@ -33,6 +33,19 @@ Kind = Literal["single", "federated"]
 TOPOLOGIES: tuple[Kind, ...] = ("federated", "single")
 
 
+def why_cannot_listen(host: str, port: int) -> str | None:
+    """Why a TCP server could not listen on host:port (a host that does not resolve, a port in
+    use, an address not this machine's), found by binding it for a moment; None if it could."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0]
+        with socket.socket(family, kind, proto) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as servers do
+            probe.bind(address)
+    except (OSError, UnicodeError) as err:  # socket.gaierror is an OSError
+        return str(err)
+    return None
+
+
 def free_port() -> int:
     return free_ports(1)[0]
 
