@@ -110,7 +110,7 @@ def test_what_a_sensor_would_wait_on_or_fail_at_is_refused_at_start(
 @pytest.mark.parametrize(
     ("module", "env", "said"),
     [
-        ("sensor_sim", {"TLTRACK_SIM_WAIT_FOR": "[bad"}, 'field "wait_for"'),
+        ("sensor_sim", {"TLTRACK_SIM_ZENOH": "{bad"}, 'field "zenoh"'),
         ("sensor", {"TLTRACK_SENSOR_ZENOH": "{bad"}, 'field "zenoh"'),
     ],
 )
@@ -232,3 +232,23 @@ def test_a_plugin_that_fails_to_import_is_refused_not_a_traceback(
     with pytest.raises(SystemExit) as stop:
         load_settings(_settings("tltrack.services.sensor.sensor"), [])
     assert stop.value.code == 2 and "half-installed" in capsys.readouterr().err
+
+
+def test_sensor_sim_waits_for_a_json_list_or_tokens_separated_by_commas(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """As the zenoh endpoints are read: the comma form was a traceback."""
+    settings = _settings("tltrack.services.sensor_sim.simulator")
+    want = ["primary:primary_tracker", "referee:scorer"]
+    for given in (
+        '["primary:primary_tracker","referee:scorer"]',
+        "primary:primary_tracker, referee:scorer",
+    ):
+        monkeypatch.setenv("TLTRACK_SIM_WAIT_FOR", given)
+        assert load_settings(settings, []).wait_for == want  # type: ignore[attr-defined]
+    monkeypatch.setenv("TLTRACK_SIM_WAIT_FOR", "[bad")
+    with pytest.raises(SystemExit) as stop:
+        load_settings(settings, [])
+    assert (
+        stop.value.code == 2 and "wait_for: Value error, Expecting value" in capsys.readouterr().err
+    )

@@ -16,12 +16,12 @@ from __future__ import annotations
 import logging
 import time
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import Field, FilePath, field_validator, model_validator
-from pydantic_settings import SettingsConfigDict
+from pydantic_settings import NoDecode, SettingsConfigDict
 from tltrack.config import Config, load_config
 from tltrack.engine.scenario import Run, simulate
 from tltrack.engine.scene import primary_scan
@@ -30,7 +30,7 @@ from tltrack.live import replay
 from tltrack.live.service import Service, ServiceSettings, load_settings, setup_logging
 from tltrack.wire import keys
 from tltrack.wire.messages import EpisodeEnd, EpisodeStart, Measurement, Tick, Truth, encode
-from tltrack.wire.transport import LivelinessWatcher, Queryable
+from tltrack.wire.transport import LivelinessWatcher, Queryable, split_list
 
 log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"
@@ -65,7 +65,7 @@ class Settings(ServiceSettings):
     measurements: bool = Field(
         True, description="publish every sensor's measurements (false: each operator's sensor)"
     )
-    wait_for: list[str] = Field(
+    wait_for: Annotated[list[str], NoDecode] = Field(
         default_factory=lambda: [
             "source/s1:source_tracker",
             "primary:primary_tracker",
@@ -87,6 +87,12 @@ class Settings(ServiceSettings):
                 "(TLTRACK_SENSOR_REPLAY_CSV); give sensor_sim only --steps"
             )
         return self
+
+    @field_validator("wait_for", mode="before")
+    @classmethod
+    def _list(cls, v: Any) -> Any:
+        """A JSON list, or tokens separated by commas (as the zenoh endpoints are)."""
+        return split_list(v)
 
     @field_validator("wait_for")
     @classmethod

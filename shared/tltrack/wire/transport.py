@@ -48,7 +48,7 @@ M = TypeVar("M", bound=Message)
 # ---- settings ---------------------------------------------------------------------------------
 
 
-def _split_list(v: Any) -> Any:
+def split_list(v: Any) -> Any:
     """From the environment: a JSON list (``["tcp/a:1"]``) or ``tcp/a:1,tcp/b:2``."""
     if isinstance(v, str):
         text = v.strip()
@@ -132,7 +132,7 @@ class ZenohSettings(BaseSettings):
     @field_validator("endpoints", "listen", mode="before")
     @classmethod
     def _lists(cls, v: Any) -> Any:
-        return _split_list(v)
+        return split_list(v)
 
     @field_validator("endpoints", "listen")
     @classmethod
