@@ -95,6 +95,9 @@ def test_run_router_refuses_a_bad_endpoint_before_opening_a_session() -> None:
         ("tltrack.services.sensor_sim.simulator", "--replay_csv=/nonexistent.csv", "does not"),
         ("tltrack.services.sensor_sim.simulator", "--wait_timeout_s=inf", "less than or equal"),
         ("tltrack.services.sensor_sim.simulator", "--linger_s=1e12", "less than or equal"),
+        ("tltrack.services.primary_tracker.tracker", "--deadline_ms=inf", "less than or equal"),
+        ("tltrack.services.primary_tracker.tracker", "--gap_timeout_s=inf", "less than or equal"),
+        ("tltrack.services.source_tracker.tracker", "--max_episodes=10000", "less than or equal"),
     ],
 )
 def test_what_a_sensor_would_wait_on_or_fail_at_is_refused_at_start(

@@ -48,13 +48,17 @@ class Settings(ServiceSettings):
 
     filter: FilterKindName = Field("rpf", description="filter kind")
     robust: bool = Field(False, description="robust-tl: judge each transfer before using it")
-    deadline_ms: float = Field(250.0, gt=0, description="longest wait for a transfer")
+    deadline_ms: float = Field(250.0, gt=0, le=60_000, description="longest wait for a transfer")
     transfer_tolerance_ms: float = Field(
-        1.0, ge=0, description="a transfer's t_apply may differ this much from its sample's time"
+        1.0,
+        ge=0,
+        le=60_000,
+        description="a transfer's t_apply may differ this much from its sample's time",
     )
     clock_skew_ms: float = Field(
         1000.0,
         gt=0,
+        le=3_600_000,
         description="the hosts' wall clocks differ by up to this: a transfer stamped later than "
         "now by more is refused",
     )
@@ -67,13 +71,14 @@ class Settings(ServiceSettings):
         "asks) mean a cut link",
     )
     gap_timeout_s: float = Field(
-        1.0, gt=0, description="step without a measurement missing this long"
+        1.0, gt=0, le=3600, description="step without a measurement missing this long"
     )
     twin_delay_ms: float = Field(
         2.0, ge=0, le=1000, description="step the isolated twin this long after the TL estimate"
     )
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
-    max_episodes: int = Field(4, ge=1)
+    #: each holds its filters' clouds: a thousand at 6000 particles is some 2 GB
+    max_episodes: int = Field(4, ge=1, le=1000, description="episodes tracked at once")
 
 
 @dataclass

@@ -43,7 +43,7 @@ class Settings(ServiceSettings):
     sensor: str = Field(
         PRIMARY, pattern=r"^[A-Za-z0-9_-]{1,32}$", description="'primary' or a source id"
     )
-    max_episodes: int = Field(4, ge=1, description="episodes measured at once")
+    max_episodes: int = Field(4, ge=1, le=1000, description="episodes measured at once")
     replay_csv: FilePath | None = Field(None, description="replay this sensor's recorded rows")
 
 

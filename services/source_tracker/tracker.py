@@ -38,7 +38,7 @@ class Settings(ServiceSettings):
     source_id: str = Field("s1", pattern=r"^[A-Za-z0-9_-]{1,32}$", description="operator id")
     filter: FilterKindName = Field("rpf", description="filter kind")
     recovery: bool = Field(True, description="reinitialise a particle filter that lost track")
-    max_episodes: int = Field(4, ge=1, description="episodes tracked at once")
+    max_episodes: int = Field(4, ge=1, le=1000, description="episodes tracked at once")
     gap_timeout_s: float = Field(1.0, gt=0, description="predict through a step missing this long")
     heartbeat_s: float = Field(
         0.1, gt=0, le=10, description="heartbeat period on the direct link to the primary"
