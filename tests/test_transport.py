@@ -231,16 +231,19 @@ def test_settings_refuse_inconsistent_values(kwargs: dict[str, object]) -> None:
         ({"tls_root_ca": "/nonexistent/ca.pem"}, "does not point to a file"),  # a client hung
         ({"access_control_file": "ACL"}, "zenoh refuses it: --> 1:1"),  # a traceback at start
         ({"access_control_file": "BIN"}, "not UTF-8 text (JSON5)"),  # named no field
+        ({"tls_root_ca": "TXT"}, "holds no PEM certificate"),  # a client retried for ever
+        ({"tls_cert": "TXT", "tls_key": "TXT"}, "holds no PEM"),
     ],
 )
 @pytest.mark.unit
 def test_settings_refuse_what_zenoh_would_crash_or_hang_on(
     kwargs: dict[str, object], said: str, tmp_path: Path
 ) -> None:
-    acl = {"ACL": b"rules: [", "BIN": b"\xff\xfe\x00"}.get(str(kwargs.get("access_control_file")))
-    if acl is not None:  # a file, but not JSON5
-        (tmp_path / "acl.json5").write_bytes(acl)
-        kwargs = {"access_control_file": tmp_path / "acl.json5"}
+    files = {"ACL": b"rules: [", "BIN": b"\xff\xfe\x00", "TXT": b"not a certificate"}
+    for field, marker in list(kwargs.items()):  # a file, but not what the field reads
+        if isinstance(marker, str) and marker in files:
+            (tmp_path / field).write_bytes(files[marker])
+            kwargs[field] = tmp_path / field
     with pytest.raises(ValueError, match=re.escape(said)):
         ZenohSettings(**kwargs)  # type: ignore[arg-type]
 

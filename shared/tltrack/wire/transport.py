@@ -24,10 +24,18 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated, Any, Literal, TypeVar
 
 import zenoh
-from pydantic import Field, FilePath, SecretStr, field_validator, model_validator
+from pydantic import (
+    Field,
+    FilePath,
+    SecretStr,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 from tltrack.wire.messages import (
     MAX_PAYLOAD_BYTES,
@@ -138,6 +146,17 @@ class ZenohSettings(BaseSettings):
     @classmethod
     def _endpoints(cls, v: list[str]) -> list[str]:
         return [check_endpoint(e) for e in v]
+
+    @field_validator("tls_root_ca", "tls_cert", "tls_key")
+    @classmethod
+    def _pem(cls, v: Path | None, info: ValidationInfo) -> Path | None:
+        """A PEM file of what the field needs: zenoh reads it only as a link opens, and a client
+        given another file retried its router for ever, saying nothing."""
+        want = "PRIVATE KEY-----" if info.field_name == "tls_key" else "BEGIN CERTIFICATE-----"
+        if v is not None and want not in v.read_bytes().decode("ascii", "replace"):
+            kind = "private key" if info.field_name == "tls_key" else "certificate"
+            raise ValueError(f"{v} holds no PEM {kind}")
+        return v
 
     @model_validator(mode="after")
     def _consistent(self) -> ZenohSettings:
