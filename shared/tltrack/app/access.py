@@ -33,7 +33,7 @@ def manifest_or_exit(path: Path | None) -> Manifest:
     try:
         return load_manifest(path)
     except ManifestError as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(2) from None
 
 

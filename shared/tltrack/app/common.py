@@ -206,7 +206,7 @@ def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor
 
     address = cluster.address(scheduler)
     if reason := cluster.refuse_workers(address, workers):
-        say_error(f"{reason}")
+        say_error(reason)
         raise typer.Exit(2)
     try:
         with cluster.pool(address, say=console.print) as ex:
@@ -214,7 +214,7 @@ def engine_pool(scheduler: str | None, workers: int | None) -> Iterator[Executor
                 console.print(f"batches go to the Dask cluster at {address}")
             yield ex
     except cluster.SchedulerError as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(1) from None
 
 

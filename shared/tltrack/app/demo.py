@@ -82,7 +82,7 @@ def demo(
     try:
         d.check_access(manifest_or_exit(manifest), cfg)
     except (ValueError, d.AccessControlMissingError) as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(2) from None
     flags = d.sim_flags(steps, particles, pace, realtime, preset, truth, seed, config=config)
     try:

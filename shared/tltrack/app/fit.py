@@ -55,7 +55,7 @@ def fit(
             xy, _origin = to_local(track)
             tracks.append(fitting.Reports(path.name, track.t - track.t[0], xy))
     except (TruthFileError, ValueError) as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(2) from None
     with console.status(f"fitting {model} to {sum(len(r.t) for r in tracks)} reports"):
         result = fitting.fit(tracks, model)  # type: ignore[arg-type]

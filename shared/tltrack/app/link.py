@@ -62,7 +62,7 @@ def link(
         shape = Shape(delay_ms / 1e3, jitter_ms / 1e3, rate)
         emulator = LinkEmulator(to, address, shape=shape, seed=seed)
     except (ValueError, OSError) as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(2) from None
     console.print(f"link {emulator.endpoint} -> {to}: {shape}")
     seen: float | None = None

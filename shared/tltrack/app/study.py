@@ -116,7 +116,7 @@ def study(
         ),
     ]
     if any(problems):
-        say_error(f"{'; '.join(p for p in problems if p)}")
+        say_error("; ".join(p for p in problems if p))
         raise typer.Exit(2)
     setting = studies.Setting(runs, seed, kind, source_filter, preset, truth, truth_file, particles)
     configurations = {
@@ -142,7 +142,7 @@ def study(
             else:
                 path = by_name[name](setting, runner, out)
         except ValueError as err:  # a refused configuration or filter
-            say_error(f"{err}")
+            say_error(str(err))
             raise typer.Exit(2) from None
     console.print(Path(path).read_text(), markup=False)
     console.print(f"wrote {path}")

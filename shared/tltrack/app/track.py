@@ -93,7 +93,7 @@ def track(
         recorded = read_scans(scans, {sid: setup.sensor(sid) for sid in setup.sensor_ids}, cfg.K)
         check_fit(setup, recorded)  # before the progress bar: a file refused draws none
     except (ScanFileError, ScansDoNotFitError) as err:
-        say_error(f"{err}")
+        say_error(str(err))
         raise typer.Exit(2) from None
     checked_folder(out)  # before the run: a folder that cannot be written loses nothing
     for reason in recorded.refused:
