@@ -190,7 +190,8 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
     monkeypatch.setenv("TLTRACK_ZENOH_USERNAME", "primary")
     monkeypatch.setenv("TLTRACK_ZENOH_PASSWORD", "s3cret")
     monkeypatch.setenv("TLTRACK_ZENOH_TLS_ROOT_CA", str(tmp_path / "ca.pem"))
-    (tmp_path / "ca.pem").write_text("")  # a file it names must be there: its contents are TLS's
+    # a file it names must be there and hold a PEM certificate: the rest is TLS's to check
+    (tmp_path / "ca.pem").write_text("-----BEGIN CERTIFICATE-----\n-----END CERTIFICATE-----\n")
     s = ZenohSettings()
     assert s.mode == "peer"
     assert s.endpoints == ["tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447"]
