@@ -379,6 +379,27 @@ def test_a_prefix_made_on_another_machine_is_read_with_a_warning(tmp_path, batch
     assert batches_run[2:] == [[0, 1, 2], [3, 4, 5]]
 
 
+def test_a_sweep_back_on_a_machine_it_ran_on_names_the_other_machine(tmp_path, batches_run):
+    """Carried A -> B -> A, the prefix lists A among the environments that made it: the warning
+    compared A with A and said "( differ; CPU a, here a)"."""
+    from tltrack.engine.checkpoint import environment
+
+    cfgs = _cfgs()
+    whole = _sweep(cfgs)
+    _as_another_cpus(_prefix_alone(tmp_path, cfgs), "prefix")
+    with pytest.warns(UserWarning, match="another environment"):
+        _sweep(cfgs, tmp_path)  # this machine's prefix, partly another's
+    (file, doc), *_ = [
+        (p, d)
+        for p in tmp_path.glob("prefix-*.json")
+        if (d := json.loads(p.read_text()))["made"]["environment"] == environment()
+    ]  # this machine's, beside the other's
+    doc["made"]["elsewhere"] = [environment(), *doc["made"]["elsewhere"]]  # A first, then B
+    file.write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=r"another environment \(cpu differ; CPU another-cpu"):
+        _same(_sweep(cfgs, tmp_path), whole)
+
+
 def test_of_one_prefix_per_machine_the_longest_is_read(tmp_path, batches_run):
     """A sweep carried from machine to machine leaves a prefix file on each: the next goes on
     from the one that got furthest, whatever the files' names, this machine's own included."""

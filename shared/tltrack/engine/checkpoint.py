@@ -383,10 +383,12 @@ class Checkpoint:
             _warn_elsewhere(path, made, "this sweep's first batches", stacklevel=3)
         if made["environment"] != environment():  # read from another machine's file
             elsewhere.append(made["environment"])
-        if elsewhere and path == own:
+        # a sweep carried back to a machine it ran on before: only the others' batches differ
+        others = [e for e in elsewhere if e != environment()]
+        if others and path == own:
             warnings.warn(
                 f"{path.name}: this sweep's first batches were made in another environment "
-                f"({_differences(elsewhere[0])}): read back, the same code and seeds but not bit "
+                f"({_differences(others[0])}): read back, the same code and seeds but not bit "
                 "for bit what this machine computes",
                 stacklevel=2,
             )
