@@ -66,6 +66,11 @@ def say_error(text: str) -> None:
     console.print(f"[red]error:[/red] {escape(text)}")
 
 
+def say_warning(text: str, label: str = "warning") -> None:
+    """Print ``text`` after a yellow ``label``, as written (:func:`say_error`)."""
+    console.print(f"[yellow]{label}:[/yellow] {escape(text)}")
+
+
 #: how often a long job writes its progress when stderr is not a terminal [s]
 LOG_EVERY_S = 60.0
 #: runs counted this soon after a task starts were read back from a checkpoint, not run [s]

@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.markup import escape
 
 from tltrack.app.common import (
     BatchSize,
@@ -23,6 +22,7 @@ from tltrack.app.common import (
     filter_names,
     progress_bar,
     say_error,
+    say_warning,
 )
 
 
@@ -198,8 +198,7 @@ def _print_table(doc: dict[str, Any]) -> None:
         console.print(f"note: {doc['pcrlb_note']}")
     for name, r in doc["filters"].items():
         if r["consistency"]:
-            said = escape(f"{name}: {r['consistency']}")
-            console.print(f"[yellow]warning:[/yellow] {said}")
+            say_warning(f"{name}: {r['consistency']}")
 
 
 @app.command()

@@ -11,9 +11,8 @@ from pathlib import Path
 from typing import Annotated, TextIO
 
 import typer
-from rich.markup import escape
 
-from tltrack.app.common import app, console, say_error
+from tltrack.app.common import app, console, say_error, say_warning
 
 
 @app.command(
@@ -106,7 +105,7 @@ def _write_jsonl(conn: sqlite3.Connection, db: Path, episode: str | None, jsonl:
         say_error(f"--db: {db}: unreadable at its row {n + 1}: {err}")
         raise typer.Exit(2) from None
     if n == 0:
-        console.print(f"[yellow]warning:[/yellow] {escape(str(db))} holds no estimate yet")
+        say_warning(f"{db} holds no estimate yet")
     console.print(f"wrote {n} lines to {'stdout' if str(jsonl) == '-' else jsonl}")
 
 

@@ -7,7 +7,6 @@ from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
-from rich.markup import escape
 
 from tltrack.app.common import (
     app,
@@ -17,6 +16,7 @@ from tltrack.app.common import (
     filter_names,
     progress_bar,
     say_error,
+    say_warning,
 )
 
 if TYPE_CHECKING:
@@ -97,8 +97,7 @@ def track(
         raise typer.Exit(2) from None
     checked_folder(out)  # before the run: a folder that cannot be written loses nothing
     for reason in recorded.refused:
-        said = escape(f"{reason}: the filters predict through it")
-        console.print(f"[yellow]refused:[/yellow] {said}")
+        say_warning(f"{reason}: the filters predict through it", "refused")
     truth = file_truth(cfg) if cfg.truth == "file" else None
     with progress_bar(cfg.K, "steps") as bar:
         task = bar.add_task("steps", total=cfg.K)
