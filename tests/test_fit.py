@@ -14,6 +14,8 @@ from tltrack.models.constant_velocity import ConstantVelocity
 from typer.testing import CliRunner
 
 pytestmark = pytest.mark.unit
+#: a terminal wide enough that a warning is one line
+WIDE = {"COLUMNS": "200"}
 
 
 def simulate(q: float, sigma: float, seed: int, reports: int = 200) -> Reports:
@@ -79,3 +81,20 @@ def test_a_fit_of_modes_writes_their_chain_at_the_filters_period(tmp_path: Path)
         cfg.mode_transition, transition(uniform_rates(3, 0.02), 2.0), atol=1e-6
     )
     assert cfg.Ts == 2.0
+
+
+def test_the_cli_warns_when_the_grid_cuts_the_fit_off(tmp_path: Path) -> None:
+    """A track reported with almost no noise puts sigma's maximum below the cv fit's grid: the
+    CLI says so, and says nothing of the kind on a track well inside it."""
+    quiet, plain = simulate(1.0, 1e-3, 4), simulate(1.0, 10.0, 4)
+    for name, r in (("quiet", quiet), ("plain", plain)):
+        (tmp_path / f"{name}.csv").write_text(
+            "t,x,y\n" + "".join(f"{a},{b},{c}\n" for a, (b, c) in zip(r.t, r.xy, strict=True))
+        )
+    runner = CliRunner()
+    done = runner.invoke(app, ["fit", "--truth-file", str(tmp_path / "quiet.csv")], env=WIDE)
+    assert done.exit_code == 0, done.output
+    assert "sigma = 0.03162 is the edge of the fit's grid, not the maximum" in done.output
+    assert "sigma's 95% interval runs past 0.03162" in done.output
+    done = runner.invoke(app, ["fit", "--truth-file", str(tmp_path / "plain.csv")], env=WIDE)
+    assert done.exit_code == 0 and "warning" not in done.output, done.output

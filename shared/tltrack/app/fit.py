@@ -8,7 +8,7 @@ from typing import Annotated, Any
 
 import typer
 
-from tltrack.app.common import app, checked_file, console, say_error
+from tltrack.app.common import app, checked_file, console, say_error, say_warning
 
 
 @app.command(
@@ -67,9 +67,60 @@ def fit(
         t.add_row(name, f"{v:.4g}", f"{lo:.4g} .. {hi:.4g}")
     t.caption = f"log-likelihood {result.loglik:.2f}"
     console.print(t)
+    for text in past_the_grid(tracks, result):
+        say_warning(text)
     if out is not None:
         out.write_text(config_text(result, Ts))
         console.print(f"wrote {out}")
+
+
+#: how far past an estimate or an interval's end :func:`past_the_grid` looks [decades]
+BEYOND = 0.1
+
+
+def past_the_grid(tracks: Any, result: Any) -> list[str]:
+    """What the cv fit's grid cut off: an estimate with a higher likelihood past it, or a 95%
+    interval still inside its level past its end.
+
+    The cv fit reads q1 and sigma off a grid (:func:`tltrack.engine.fit.fit`) and cannot report
+    a maximum or an interval end beyond it: real tracks reach its edges (an anchored ship's q1, a
+    simulated track's sigma near 0). The likelihood :data:`BEYOND` past the value, the other
+    parameter held at its estimate, is at most the profile's there, so each warning is sure: the
+    maximum, or the interval, lies further out. ``modes`` and ``manoeuvres`` take q1_straight
+    from the cv fit, which is checked for them; ``ct`` is searched without a grid.
+    """
+    from scipy.stats import chi2
+
+    from tltrack.engine import fit as fitting
+
+    if result.kind == "ct":
+        return []
+    cv = result if result.kind == "cv" else fitting.fit(tracks, "cv")
+    shown = {"q1": "q1", "sigma": "sigma"} if result.kind == "cv" else {"q1": "q1_straight"}
+    level = cv.loglik - float(chi2.ppf(0.95, 1)) / 2.0
+    found = []
+    for p, name in shown.items():
+        v, (lo, hi) = cv.values[p], cv.intervals[p]
+
+        def ll(x: float, p: str = p) -> float:
+            return fitting.loglik(tracks, "cv", {**cv.values, p: x})
+
+        top = max(cv.loglik, ll(v))  # the grid's best, or the estimate's between its points
+        for side in (-1, 1):
+            past = v * 10.0 ** (side * BEYOND)
+            if ll(past) > top:
+                found.append(
+                    f"{name} = {v:.4g} is the edge of the fit's grid, not the maximum: the "
+                    f"likelihood is higher at {past:.4g}"
+                )
+        for end, side in ((lo, -1), (hi, 1)):
+            past = end * 10.0 ** (side * BEYOND)
+            if ll(past) >= level:
+                found.append(
+                    f"{name}'s 95% interval runs past {end:.4g}, where the fit's grid ends: "
+                    f"it is wider than shown (the likelihood at {past:.4g} is still inside it)"
+                )
+    return found
 
 
 def config_text(result: Any, Ts: float) -> str:
