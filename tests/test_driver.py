@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -44,19 +45,23 @@ CFG = make_config(preset="arasaratnam-haykin", truth="fixed", K=20, particles=30
 RUNS = [0, 1, 2]
 
 
-def _steps(channel: object | None, names: list[str]) -> dict[str, list[StepRecord]]:
-    """Every record of ``names`` over the runs, the transfers carried by ``channel``."""
+def _steps(
+    channel: object | None, names: list[str], also: Callable[[StepRecord], None] | None = None
+) -> dict[str, list[StepRecord]]:
+    """Every record of ``names`` over the runs, the transfers carried by ``channel``; ``also``
+    sees each record as it is made (its filter is the live one, stepped on afterwards)."""
     setup = Setup(CFG)
     sims = [simulate(setup, r) for r in RUNS]
     x0 = np.stack([s.x0_hat for s in sims], axis=1)
     out: dict[str, list[StepRecord]] = {}
+    keep: list[Callable[[StepRecord], None]] = [lambda r: out.setdefault(r.name, []).append(r)]
     driver = Driver(
         [setup],
         names,
         x0,
         RUNS,
         channel=channel,
-        collectors=[[lambda r: out.setdefault(r.name, []).append(r)]],  # type: ignore[arg-type]
+        collectors=[keep + ([also] if also else [])],
     )
     for k in range(1, CFG.K + 1):
         z = {
@@ -151,11 +156,18 @@ def test_the_engine_is_the_driver_with_the_scores_collector() -> None:
 
 
 def test_collectors_see_the_diagnostics_of_every_step() -> None:
-    records = _steps(None, ["tl-rpf", "robust-tl-rpf"])
+    seen: list[np.ndarray | None] = []
+
+    def ess_now(r: StepRecord) -> None:
+        if r.name == "tl-rpf":
+            seen.append(effective_sample_size(r.filter))
+
+    records = _steps(None, ["tl-rpf", "robust-tl-rpf"], also=ess_now)
     assert {len(v) for v in records.values()} == {CFG.K}
     assert records.keys() == {"tl-rpf", "robust-tl-rpf", "source-rpf"}
-    ess = np.array([effective_sample_size(r.filter) for r in records["tl-rpf"]])
+    ess = np.array(seen)
     assert ess.shape == (CFG.K, len(RUNS)) and np.all((ess >= 1) & (ess <= CFG.particles))
+    assert len({tuple(e) for e in ess}) == CFG.K  # each step's own weights, not the last's
     sent = [r.transfer for r in records["source-rpf"]]
     assert all(t is not None and t.origin == "s1" for t in sent)
     assert records["tl-rpf"][0].used is None  # no transfer exists for k = 1

@@ -87,11 +87,14 @@ def assert_genuine(
     cfg = make_config(**SIM_DEFAULTS, K=K, particles=N, recovery=True)
     offline = trace_run(cfg, list(names), run=run)
     for name in names:
-        for k, (x, *_) in stored(db, episode, name).items():
-            if upto is None or k <= upto:
-                np.testing.assert_allclose(
-                    x, offline[name][k - 1], rtol=0, atol=1e-9, err_msg=f"{episode} {name} k={k}"
-                )
+        rows = {
+            k: x for k, (x, *_) in stored(db, episode, name).items() if upto is None or k <= upto
+        }
+        assert rows, f"{episode}: no {name} estimate stored to compare"
+        for k, x in rows.items():
+            np.testing.assert_allclose(
+                x, offline[name][k - 1], rtol=0, atol=1e-9, err_msg=f"{episode} {name} k={k}"
+            )
 
 
 def start(s: supervisor.Stack, db: Path, K: int, **primary: str) -> None:

@@ -66,7 +66,7 @@ def test_a_failed_episode_has_no_ratio() -> None:
 @pytest.mark.integration
 def test_the_round_trip_goes_through_real_routers_to_another_process(kind: str) -> None:
     got = rtt.measure(kind, samples=200, warmup=20)
-    assert 0 < got["p50"] <= got["p99"] < 2000  # every pong came back, within its 2 s wait
+    assert got["n"] == 200 and 0 < got["p50"] < 2000, got  # every ping had its pong
 
 
 @pytest.mark.skipif(
@@ -76,7 +76,7 @@ def test_the_round_trip_goes_through_real_routers_to_another_process(kind: str) 
 @pytest.mark.unit
 def test_the_round_trip_goes_through_stock_zenohd_routers_too() -> None:
     got = rtt.measure("federated", samples=200, warmup=20, zenohd=True)
-    assert 0 < got["p50"] <= got["p99"] < 2000
+    assert got["n"] == 200 and 0 < got["p50"] < 2000, got
 
 
 @pytest.mark.unit

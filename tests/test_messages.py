@@ -216,7 +216,7 @@ def test_unknown_schema_version(version: Any) -> None:
 
 
 def test_constructing_an_unknown_version_fails() -> None:
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=f"schema_version {V + 1} is not supported"):
         Measurement(**COMMON, k=0, sensor="a", z=[[1.0, 2.0]], schema_version=V + 1)
 
 

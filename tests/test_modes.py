@@ -74,8 +74,8 @@ def test_the_turn_mode_takes_over_within_five_steps_of_a_turn_and_lets_go_after_
     for name in names:
         p = np.array(turning[name]).mean(axis=1)  # P(ct) at k = 1..K, over the runs
         assert p[20:30].max() < 0.5, (name, p[20:30])  # straight: the cv mode holds
-        first = 31 + int(np.argmax(p[30:] > 0.5))  # the turn starts at k = 31
-        assert first <= 36, (name, np.round(p[28:40], 2))
+        over = np.flatnonzero(p[30:] > 0.5)  # the turn starts at k = 31
+        assert over.size and 31 + over[0] <= 36, (name, np.round(p[28:40], 2))
         assert p[75:].max() < 0.5, (name, p[75:])  # straight again
 
 

@@ -203,21 +203,21 @@ def test_settings_from_environment(monkeypatch: pytest.MonkeyPatch, tmp_path: Pa
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    ("kwargs", "said"),
     [
-        {"mode": "broker"},
-        {"username": "u"},
-        {"password": "p"},
-        {"tls_cert": "c.pem"},
-        {"tls_mtls": True},
-        {"endpoints": []},
-        {"lease_ms": 10},
-        {"unknown_field": 1},
+        ({"mode": "broker"}, "Input should be 'client', 'peer' or 'router'"),
+        ({"username": "u"}, "username and password must be given together"),
+        ({"password": "p"}, "username and password must be given together"),
+        ({"tls_cert": "c.pem"}, "Path does not point to a file"),
+        ({"tls_mtls": True}, "tls_mtls needs tls_root_ca, tls_cert and tls_key"),
+        ({"endpoints": []}, "a client needs at least one endpoint"),
+        ({"lease_ms": 10}, "greater than or equal to 500"),
+        ({"unknown_field": 1}, "Extra inputs are not permitted"),
     ],
 )
 @pytest.mark.unit
-def test_settings_refuse_inconsistent_values(kwargs: dict[str, object]) -> None:
-    with pytest.raises(ValueError):
+def test_settings_refuse_inconsistent_values(kwargs: dict[str, object], said: str) -> None:
+    with pytest.raises(ValueError, match=re.escape(said)):
         ZenohSettings(**kwargs)  # type: ignore[arg-type]
 
 

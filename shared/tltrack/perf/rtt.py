@@ -71,8 +71,9 @@ def _wait_listening(stack: supervisor.Stack, name: str, endpoint: str, zenohd: b
 def measure(
     kind: Kind, samples: int = 2000, warmup: int = 200, zenohd: bool = False
 ) -> dict[str, float]:
-    """p50 and p99 of ``samples`` round trips (ms), after ``warmup`` unrecorded ones; with
-    ``zenohd``, through stock Rust routers (on PATH, ``make zenohd``) instead of the product's."""
+    """p50 and p99 of ``samples`` round trips (ms), after ``warmup`` unrecorded ones, and ``n``
+    the round trips timed (a pong missing for 2 s raises); with ``zenohd``, through stock Rust
+    routers (on PATH, ``make zenohd``) instead of the product's."""
     ports = topology.free_ports(2)
     first, last = (f"tcp/127.0.0.1:{p}" for p in ports)
     with (
@@ -113,4 +114,4 @@ def _ping(endpoint: str, samples: int, warmup: int) -> dict[str, float]:
         for entity in (pub, sub, watch):
             entity.undeclare()
     p50, p99 = np.percentile(rtts, [50, 99])
-    return {"p50": float(p50), "p99": float(p99)}
+    return {"p50": float(p50), "p99": float(p99), "n": len(rtts)}
