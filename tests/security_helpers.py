@@ -19,13 +19,14 @@ from typing import Any
 import zenoh
 from livestack import sim_flags
 from tltrack.live import supervisor
-from tltrack.live.supervisor import IDENTITY, identity_env, passwords
+from tltrack.live.access import ACCESS_DIR
+from tltrack.live.supervisor import IDENTITY
 from tltrack.wire import keys
 from tltrack.wire.transport import LivelinessWatcher, ZenohSettings, open_session, query
 
 ROOT = Path(__file__).resolve().parents[1]
-ACL = supervisor.ACCESS_DIR / "acl.json5"
-USERS = supervisor.ACCESS_DIR / "users.txt"
+ACL = ACCESS_DIR / "acl.json5"
+USERS = ACCESS_DIR / "users.txt"
 ROUTER_TLS_ENV = ROOT / "deploy" / "zenoh" / "router-tls.env"
 MAKE_CERTS = ROOT / "scripts" / "make_certs.sh"
 
@@ -134,6 +135,12 @@ def wait_for_router(s: supervisor.Stack, starts: int, timeout: float = 30.0) -> 
         time.sleep(0.05)
 
 
+def passwords(users: Path = USERS) -> dict[str, str]:
+    """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
+    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
+    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
+
+
 def start_service(
     s: supervisor.Stack,
     name: str,
@@ -142,7 +149,9 @@ def start_service(
     env: dict[str, str] | None = None,
 ) -> None:
     """A service under its operator's identity (:data:`IDENTITY`)."""
-    s.start_service(name, *flags, env={**identity_env(IDENTITY[name], users), **(env or {})})
+    user = IDENTITY[name]
+    creds = {"TLTRACK_ZENOH_USERNAME": user, "TLTRACK_ZENOH_PASSWORD": passwords(users)[user]}
+    s.start_service(name, *flags, env={**creds, **(env or {})})
 
 
 def start_trackers_and_scorer(

@@ -38,10 +38,11 @@ import zenoh
 from batch import BELOW
 from livestack import wait_until
 from relay import captured, found, sentinels
+from security_helpers import passwords
 from tltrack.config import make_config
 from tltrack.engine.scenario import measurements, truth
 from tltrack.engine.setup import Setup
-from tltrack.live.supervisor import IDENTITY, passwords
+from tltrack.live.supervisor import IDENTITY
 from tltrack.wire import keys
 from tltrack.wire.transport import Subscriber, ZenohSettings, open_session, query
 

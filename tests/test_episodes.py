@@ -132,3 +132,17 @@ def test_a_tracker_takes_only_scans_its_sensor_could_have_made(clutter: bool) ->
     for k, z in enumerate([[[1e300, 0.1]], [[-5.0, 0.1]], [[1000.0, 100.0]]], start=4):
         offer(k, z)
     assert rejects.count(reason="out_of_range") == 3, rejects.snapshot()
+
+
+def test_a_missing_step_is_given_up_on_only_after_the_gap_timeout() -> None:
+    """Step 2 never comes while 4 waits: released in order up to 1, then steps 2 and 3 are
+    overdue once the gap has lasted longer than the timeout, and never before."""
+    q: StepQueue[str] = StepQueue()
+    for k in (1, 4):
+        assert q.offer(k, f"z{k}") == "accepted"
+    assert q.ready() == "z1" and q.release() == "z1" and q.ready() is None
+    assert q.overdue(2.0, now=100.0) == []  # the gap starts here
+    assert q.overdue(2.0, now=101.9) == []
+    assert q.overdue(2.0, now=102.1) == [2, 3]
+    assert q.ready() == "z4" and q.offer(3, "late") == "stale"
+    assert q.overdue(2.0, now=200.0) == []  # nothing missing: no gap

@@ -117,7 +117,7 @@ def run_episode(
         "sensor_sim",
         *sim_flags(steps, N, pace=pace),
         *([f"--config={sim_config}"] if sim_config else []),
-        env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait), "TLTRACK_SIM_WAIT_TIMEOUT_S": "60"},
+        env={**supervisor.sim_env(wait), "TLTRACK_SIM_WAIT_TIMEOUT_S": "60"},
     )
     assert steps == cfg.K
 

@@ -3,7 +3,6 @@ compose.yaml follow from it, and a fourth source operator is one entry in it."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -88,7 +87,7 @@ def test_a_fourth_source_from_the_manifest_runs_live_and_a_stranger_is_refused_e
         s.start_service("scorer", env={"TLTRACK_SCORER_DB": str(db)})
         wait = s.start_trackers(cfg)
         flags = [*sim_flags(K, 300), f"--config={config}"]
-        s.start_service("sensor_sim", *flags, env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait)})
+        s.start_service("sensor_sim", *flags, env=supervisor.sim_env(wait))
         assert s.wait("sensor_sim", 120) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 120, "referee") is not None, logs(s)
         for router in topo.routers.values():

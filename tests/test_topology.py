@@ -7,9 +7,9 @@ import json
 
 import pytest
 import zenoh
+from security_helpers import passwords
 from tltrack.live.access import ACCESS_DIR, router_env
 from tltrack.live.manifest import load_manifest
-from tltrack.live.supervisor import passwords
 from tltrack.live.topology import federated, identity_operator, router_argv
 
 MANIFEST = load_manifest()

@@ -6,7 +6,6 @@ Light on purpose: no web framework is imported until the dashboard process itsel
 
 from __future__ import annotations
 
-import json
 import time
 import urllib.error
 import urllib.request
@@ -16,8 +15,6 @@ from tltrack.services.dashboard.settings import DEFAULT_HOST, DEFAULT_PORT, NAME
 
 #: the dashboard's liveliness token, as sensor_sim's ``wait_for`` names it
 TOKEN = f"referee:{NAME}"
-#: sensor_sim's default ``wait_for`` plus the dashboard
-SIM_WAIT_FOR = ["source/s1:source_tracker", "primary:primary_tracker", "referee:scorer", TOKEN]
 
 
 class _Stack(Protocol):
@@ -27,11 +24,6 @@ class _Stack(Protocol):
 def env(port: int = DEFAULT_PORT, host: str = DEFAULT_HOST) -> dict[str, str]:
     """The dashboard's environment."""
     return {"TLTRACK_DASHBOARD_HOST": host, "TLTRACK_DASHBOARD_PORT": str(port)}
-
-
-def sim_env() -> dict[str, str]:
-    """sensor_sim's environment so that it also waits for the dashboard's liveliness token."""
-    return {"TLTRACK_SIM_WAIT_FOR": json.dumps(SIM_WAIT_FOR)}
 
 
 def url(port: int = DEFAULT_PORT, host: str = DEFAULT_HOST) -> str:

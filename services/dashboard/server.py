@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 
 from tltrack.live.service import Service, load_settings, setup_logging
-from tltrack.services.dashboard.ingest import SUBSCRIPTIONS, Ingest
+from tltrack.services.dashboard.ingest import Ingest
 from tltrack.services.dashboard.metrics import Metrics
 from tltrack.services.dashboard.settings import NAME, Settings
 from tltrack.services.dashboard.state import State
@@ -40,7 +40,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
             ingest = Ingest(state, metrics, svc.rejects)
-            inbox = svc.subscribe(*SUBSCRIPTIONS)
+            inbox = svc.subscribe(*keys.REFEREE_READS)  # liveliness: its own subscriber
             alive = svc.subscribe(keys.ALIVE, liveliness=True)
             svc.announce()
             log.info(

@@ -18,7 +18,6 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-import numpy as np
 from tltrack.config.timeline import Timeline
 from tltrack.engine.names import operator_of
 from tltrack.engine.setup import PRIMARY, sensor_spec
@@ -36,13 +35,6 @@ MAX_STATS_ENTRIES = 256  #: keys kept per mapping in a service's statistics
 
 def _xy(pos: list[float]) -> XY:
     return (float(pos[0]), float(pos[1]))
-
-
-def _percentiles(values: list[float]) -> dict[str, float | None]:
-    if not values:
-        return {"p50": None, "p95": None, "p99": None}
-    p = np.percentile(values, [50, 95, 99])
-    return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}
 
 
 def _thin(n: int, limit: int) -> range | list[int]:
@@ -290,7 +282,7 @@ class State:
                 return "capacity", None
             tr.pos[m.k] = _xy(m.pos)
             tr.used[m.k] = m.transfer_used
-            tr.latency_ms[m.k] = (t_recv - m.t_sensor) * 1e3
+            tr.latency_ms[m.k] = latency.end_to_end_ms(m.t_sensor, t_recv)
             tr.step_ms[m.k] = m.step_ms
             tr.record_nis(m.nis_window, m.nis_band)
             if (split := latency.of(m, t_recv)) is not None:
@@ -405,8 +397,8 @@ class State:
                     "error": [list(errs[i]) for i in _thin(len(errs), self.max_points)],
                     "rmse": tr.rmse,
                     "rmse_k": errs[-1][1] if errs else None,
-                    "latency_ms": _percentiles(list(tr.latency_ms.values())),
-                    "step_ms": _percentiles(list(tr.step_ms.values())),
+                    "latency_ms": latency.percentiles(list(tr.latency_ms.values())),
+                    "step_ms": latency.percentiles(list(tr.step_ms.values())),
                     "stages_ms": latency.p50(list(tr.stages.values())),
                     "transfer_used": used,
                     "transfer_skipped": len(ks) - used,

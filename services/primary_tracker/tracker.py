@@ -226,13 +226,12 @@ class PrimaryTracker:
         self.check_links()  # a step waiting for a source whose link is cut waits no longer
         wait: float | None = None
         for e, ep in self.episodes.items():
-            if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
-                skipped = ep.steps.skip()
+            if skipped := ep.steps.overdue(self.s.gap_timeout_s, time.monotonic()):
                 log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
-                for k in skipped:  # on the clock, but nothing published: a gap, not a guess
-                    ep.tracker.step(None, ep.transfers.pop(k, {}))
-                    self._twin_later(e, ep, None)
-                    self.svc.count("steps_skipped")
+            for k in skipped:  # on the clock, but nothing published: a gap, not a guess
+                ep.tracker.step(None, ep.transfers.pop(k, {}))
+                self._twin_later(e, ep, None)
+                self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 now = time.monotonic()
                 if ep.ready_since is None:

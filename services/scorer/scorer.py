@@ -31,7 +31,7 @@ from tltrack.live.summary import print_summary
 from tltrack.services.scorer.store import Store
 from tltrack.services.scorer.summary import Summarizer
 from tltrack.wire import admission, keys
-from tltrack.wire.messages import MAX_PAYLOAD_BYTES, EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth, decode_stats
 from tltrack.wire.transport import Queryable, Received, decode_received
 
 log = logging.getLogger("scorer")
@@ -178,11 +178,7 @@ class Scorer:
 
     def _on_stats(self, item: Received, operator: str, service: str) -> None:
         try:
-            if len(item.payload) > MAX_PAYLOAD_BYTES:
-                raise ValueError("too large")
-            stats = json.loads(item.payload)
-            if not isinstance(stats, dict):
-                raise ValueError("not an object")
+            stats = decode_stats(item.payload)
         except ValueError:
             self.svc.rejects.add(item.key, "bad_stats")
             return
@@ -224,13 +220,7 @@ def main(argv: list[str] | None = None) -> None:
     try:
         with Service(NAME, keys.REFEREE, settings.zenoh) as svc:
             scorer = Scorer(settings, svc, store)
-            inbox = svc.subscribe(
-                keys.EPISODES,
-                keys.TRUTHS,
-                keys.SOURCE_ESTIMATES,
-                keys.PRIMARY_ESTIMATES,
-                f"{keys.ROOT}/**/stats/*",
-            )
+            inbox = svc.subscribe(*keys.REFEREE_READS)
             scorer.catch_up(svc.running_episodes())
             with Queryable(svc.session, keys.SCORER_SUMMARY, scorer.answer):
                 svc.announce()

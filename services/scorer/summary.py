@@ -31,13 +31,6 @@ from tltrack.live.scores import squared_error
 from tltrack.services.scorer.store import Store
 
 
-def _percentiles(ms: NDArray[np.float64]) -> dict[str, float | None]:
-    if len(ms) == 0:
-        return {"p50": None, "p95": None, "p99": None}
-    p = np.percentile(ms, [50, 95, 99])
-    return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}
-
-
 def _rmse(k: NDArray[np.int64], sq: NDArray[np.float64]) -> dict[str, Any]:
     """RMSE(k) = sqrt(mean over episodes of the squared error at k), and its mean over k."""
     if len(k) == 0:
@@ -191,7 +184,7 @@ class Summarizer:
                 "gaps": expected - steps,
                 "steps_with_transfer": sum(s.used for s in mine),
                 "recoveries": sum(s.recoveries for s in mine),
-                "latency_ms": _percentiles(end_to_end[-1]),
+                "latency_ms": latency.percentiles(end_to_end[-1]),
                 "stages_ms": latency.p50(split[-1]),
                 **_consistency(
                     np.concatenate([s.nis for s in mine]), np.concatenate([s.band for s in mine])
@@ -212,7 +205,7 @@ class Summarizer:
                 for e, r, K, _ended, reason in eps
             ],
             "filters": filters,
-            "latency_ms": _percentiles(np.concatenate(end_to_end)),
+            "latency_ms": latency.percentiles(np.concatenate(end_to_end)),
             "stages_ms": latency.p50(np.concatenate(split)),
             "messages": {
                 "rejected": rejected,

@@ -63,8 +63,7 @@ class Sensor:
         self.episodes: Episodes[Measured] = Episodes(settings.max_episodes, self._open)
 
     def key(self, e: str) -> str:
-        sid = self.s.sensor
-        return keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
+        return keys.meas(self.s.sensor, e)
 
     def handle(self, item: Received) -> None:
         info = self.svc.key_info(item)

@@ -36,6 +36,10 @@ log = logging.getLogger("sensor_sim")
 NAME = "sensor_sim"
 
 
+#: the tokens sensor_sim awaits by default: the default stack's trackers and scorer
+WAIT_FOR = ("source/s1:source_tracker", "primary:primary_tracker", "referee:scorer")
+
+
 class Settings(ServiceSettings):
     """Environment ``TLTRACK_SIM_<FIELD>`` or ``--<field>``."""
 
@@ -66,11 +70,7 @@ class Settings(ServiceSettings):
         True, description="publish every sensor's measurements (false: each operator's sensor)"
     )
     wait_for: Annotated[list[str], NoDecode] = Field(
-        default_factory=lambda: [
-            "source/s1:source_tracker",
-            "primary:primary_tracker",
-            "referee:scorer",
-        ],
+        default_factory=lambda: list(WAIT_FOR),
         description="operator:service tokens to await before starting",
     )
     #: a day at most: a longer wait overflows the clock's deadline (inf crashed the wait)
@@ -222,9 +222,8 @@ class Simulator:
             if sim is not None:
                 self.svc.publish(keys.truth(e), self._truth(e, n, t, sim))
             for sid, (k_own, z) in scans[n - 1].items():
-                key = keys.primary_meas(e) if sid == PRIMARY else keys.source_meas(sid, e)
                 self.svc.publish(
-                    key,
+                    keys.meas(sid, e),
                     Measurement(
                         episode=e,
                         sender=NAME,

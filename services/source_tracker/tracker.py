@@ -96,12 +96,11 @@ class SourceTracker:
         """Step on every measurement in order; predict through steps missing too long."""
         self.episodes.expire(self.svc.rejects)
         for e, ep in self.episodes.items():
-            if ep.steps.stalled(time.monotonic()) > self.s.gap_timeout_s:
-                skipped = ep.steps.skip()
+            if skipped := ep.steps.overdue(self.s.gap_timeout_s, time.monotonic()):
                 log.warning("episode %s: no measurement for steps %s; predicting", e, skipped)
-                for _ in skipped:  # on the clock, but nothing published: a gap, not a guess
-                    ep.tracker.step(None)
-                    self.svc.count("steps_skipped")
+            for _ in skipped:  # on the clock, but nothing published: a gap, not a guess
+                ep.tracker.step(None)
+                self.svc.count("steps_skipped")
             while (z := ep.steps.ready()) is not None:
                 ep.steps.release()
                 self._step(e, ep, z)

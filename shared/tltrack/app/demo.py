@@ -144,8 +144,7 @@ def _run_demo(
                 raise typer.Exit(1)
             wait_for.append(launch.TOKEN)  # sensor_sim also waits for the page: no step missed
             console.print(f"dashboard: [bold]{page}[/bold]  (Prometheus metrics: {page}metrics)")
-        sim_env = {"TLTRACK_SIM_WAIT_FOR": json.dumps(wait_for)}
-        stack.start_service("sensor_sim", *sim_flags, env=sim_env)
+        stack.start_service("sensor_sim", *sim_flags, env=d.sim_env(wait_for))
         K = cfg.K
         budget = K * (cfg.Ts if realtime else 1.0 / pace if pace > 0 else 0.0) + 120
         with progress_bar(K, "episode") as bar:

@@ -28,7 +28,6 @@ from typing import Any
 
 from tltrack.wire import admission, keys
 from tltrack.wire.messages import (
-    MAX_PAYLOAD_BYTES,
     EpisodeEnd,
     EpisodeStart,
     EstimateMsg,
@@ -38,6 +37,7 @@ from tltrack.wire.messages import (
     Tick,
     Transfer,
     Truth,
+    decode_stats,
 )
 from tltrack.wire.messages import decode as decode_message
 
@@ -97,12 +97,10 @@ def _json(key: str, kind: str, value: bytes) -> dict[str, Any]:
     """A service's statistics (an object, as the scorer and the dashboard take them), or the
     scorer's summary (a get's reply), passed through."""
     try:
-        if kind == "stats" and len(value) > MAX_PAYLOAD_BYTES:
-            raise ValueError(f"{len(value)} B > {MAX_PAYLOAD_BYTES} B")
-        data = json.loads(value)
-        if not isinstance(data, dict):
+        data = decode_stats(value) if kind == "stats" else json.loads(value)
+        if not isinstance(data, dict):  # a summary is an object too
             raise ValueError(f"a JSON {type(data).__name__}, not an object")
-    except (ValueError, TypeError, RecursionError) as err:
+    except (ValueError, RecursionError) as err:
         reason = "bad_stats" if kind == "stats" else "not_json"
         return {"key": key, "refused": reason, "detail": f"{type(err).__name__}: {err}"}
     return {"key": key, "kind": kind, "fields": data}

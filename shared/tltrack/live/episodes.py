@@ -28,7 +28,8 @@ class StepQueue(Generic[T]):
 
     ``offer`` refuses a duplicate, a step already released (stale) or one more than ``window``
     steps ahead, so a flood of bogus steps cannot grow memory. When a step is missing while later
-    ones wait, :meth:`stalled` reports how long; the caller may then :meth:`skip` it.
+    ones wait, :meth:`stalled` reports how long; the caller may then :meth:`skip` it
+    (:meth:`overdue` does both).
     """
 
     def __init__(self, window: int = 256) -> None:
@@ -73,6 +74,11 @@ class StepQueue(Generic[T]):
         self.next_k = min(self._held)
         self._stall_since = None
         return list(range(first, self.next_k))
+
+    def overdue(self, gap_timeout_s: float, now: float) -> list[int]:
+        """The steps a tracker gives up on at ``now``: :meth:`skip`'s, once ``next_k`` has been
+        :meth:`stalled` for more than ``gap_timeout_s``; else none."""
+        return self.skip() if self.stalled(now) > gap_timeout_s else []
 
 
 class Sensing(Protocol):

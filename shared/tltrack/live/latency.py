@@ -58,3 +58,12 @@ def p50(rows: Sequence[tuple[float, ...]] | NDArray[np.float64]) -> dict[str, fl
     if len(rows) == 0:
         return {s: None for s in STAGES}
     return dict(zip(STAGES, (float(v) for v in np.median(np.array(rows), axis=0)), strict=True))
+
+
+def percentiles(ms: Sequence[float] | NDArray[np.float64]) -> dict[str, float | None]:
+    """p50, p95 and p99 of latencies ``ms`` (None each when there are none): what the scorer's
+    summary and the dashboard report."""
+    if len(ms) == 0:
+        return {"p50": None, "p95": None, "p99": None}
+    p = np.percentile(ms, [50, 95, 99])
+    return {"p50": float(p[0]), "p95": float(p[1]), "p99": float(p[2])}

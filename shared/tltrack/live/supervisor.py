@@ -26,7 +26,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -35,7 +35,6 @@ from typing import IO, Any
 import zenoh
 from tltrack.config import Config, plugins
 from tltrack.live import access, topology
-from tltrack.live.access import ACCESS_DIR
 from tltrack.live.manifest import DEFAULT, REFEREE_SERVICES, Manifest, load_manifest
 from tltrack.live.manifest import ENV as MANIFEST_ENV
 from tltrack.live.topology import Topology
@@ -62,30 +61,16 @@ class AccessControlMissingError(RuntimeError):
     know whom to let in."""
 
 
-def check_access(manifest: Manifest, cfg: Config | None = None) -> None:
+def check_access(manifest: Manifest, cfg: Config) -> None:
     """Raise :class:`AccessControlMissingError` unless the manifest lists every source operator
     of ``cfg``."""
-    unknown = [s.id for s in (cfg.sources if cfg else []) if s.id not in manifest.source_ids]
+    unknown = [s.id for s in cfg.sources if s.id not in manifest.source_ids]
     if unknown:
         raise AccessControlMissingError(
             f"the operator manifest lists sources {', '.join(manifest.source_ids)}, not "
             f"{', '.join(unknown)}: rename the sources, or add them to the manifest "
             f"(--manifest FILE; the package's is {DEFAULT})"
         )
-
-
-def passwords(users: Path = ACCESS_DIR / "users.txt") -> dict[str, str]:
-    """user -> password from a Zenoh usrpwd dictionary (``user:password`` lines)."""
-    lines = [ln.strip() for ln in users.read_text().splitlines() if ln.strip()]
-    return {user: pw for user, pw in (ln.split(":", 1) for ln in lines)}
-
-
-def identity_env(user: str, users: Path | None = None) -> dict[str, str]:
-    """The environment that makes a service connect as ``user``: its demo password, or the one
-    of the dictionary ``users``."""
-    if users is None:
-        return access.identity_env(user)
-    return {"TLTRACK_ZENOH_USERNAME": user, "TLTRACK_ZENOH_PASSWORD": passwords(users)[user]}
 
 
 # ---- stopping -----------------------------------------------------------------------------------
@@ -281,7 +266,7 @@ class Stack:
         (default: the service's, :data:`IDENTITY`) when the stack is secure."""
         module = service or name
         user = identity or IDENTITY[module]
-        extra = identity_env(user) if self.secure else {}
+        extra = access.identity_env(user) if self.secure else {}
         if self.federated and self.topology is not None:
             extra["TLTRACK_ZENOH_ENDPOINTS"] = json.dumps([self.topology.endpoint(user)])
             if module == "sensor_sim":  # each operator's sensor measures; sensor_sim keeps time
@@ -453,6 +438,12 @@ def serve_until_interrupted(stack: Stack, name: str) -> None:
     """Keep the stack up until a stop signal (see :func:`stop_on_signals`) or ``name`` dies."""
     while stack.procs[name].poll() is None:
         time.sleep(0.5)
+
+
+def sim_env(wait_for: Sequence[str]) -> dict[str, str]:
+    """sensor_sim's environment that makes it await the ``operator:service`` tokens ``wait_for``
+    (:meth:`Stack.start_trackers` returns those of the trackers it started)."""
+    return {"TLTRACK_SIM_WAIT_FOR": json.dumps(list(wait_for))}
 
 
 def sim_flags(

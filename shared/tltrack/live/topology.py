@@ -110,11 +110,6 @@ class Router:
         """``referee``, ``primary``, ``source-s1``: its process and file names."""
         return _name(self.operator)
 
-    @property
-    def user(self) -> str:
-        """The identity it dials other routers under."""
-        return f"router-{self.name}"
-
 
 @dataclass(frozen=True)
 class Topology:

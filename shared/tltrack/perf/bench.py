@@ -196,11 +196,11 @@ def _one_pass(
     )
     ss = (
         _stonesoup_stepper(setup, sim.z[PRIMARY], sim.x0_hat, cfg.particles, seed)
-        if (with_stonesoup)
+        if with_stonesoup
         else None
     )
 
-    def baseline(k: int, z_p: Observation, t: Observation | None) -> None:
+    def baseline(k: int, t: Observation | None) -> None:
         stmts = [(sim.z[PRIMARY][k - 1], R_p, s_p.position)]
         if t is not None:
             stmts.append((t.mean[:, 0], t.cov[0], s_s.position))
@@ -228,7 +228,7 @@ def _one_pass(
         "tl-rpf": lambda k, z_p, z_s, t: tl_step(primaries, "tl-rpf", k, z_p, t.get("source-rpf")),
         "rpf": lambda k, z_p, z_s, t: tl_step(primaries, "rpf", k, z_p, None),
         "user-model": lambda k, z_p, z_s, t: user_step(k, z_p, t.get("source-pf")),
-        "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, z_p, t.get("source-pf")),
+        "numpy-baseline": lambda k, z_p, z_s, t: baseline(k, t.get("source-pf")),
     }
     if ss is not None:
         steppers["stonesoup"] = lambda k, z_p, z_s, t: ss(k)
@@ -324,7 +324,3 @@ def format_table(result: dict[str, Any]) -> str:
     for role, v in result.get("rpf_over_pf", {}).items():
         lines.append(f"{role}rpf / {role}pf: {'n/a' if v is None else f'{v:.2f}x'}")
     return "\n".join(lines)
-
-
-if __name__ == "__main__":  # python -m tltrack.perf.bench
-    print(format_table(run_bench()))

@@ -11,7 +11,6 @@ filter's step live against the same step in-process (:func:`tltrack.perf.bench.r
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 from pathlib import Path
@@ -45,7 +44,7 @@ def episode(
         )
         wait = stack.start_trackers(make_config())
         flags = supervisor.sim_flags(steps, particles, pace, False, PRESET, TRUTH, SEED)
-        stack.start_service("sensor_sim", *flags, env={"TLTRACK_SIM_WAIT_FOR": json.dumps(wait)})
+        stack.start_service("sensor_sim", *flags, env=supervisor.sim_env(wait))
         stack.wait("sensor_sim", steps / pace + 120)
         summary = supervisor.wait_for_scored(stack.endpoint, 1, 60, "referee")
     return summary or {}

@@ -40,7 +40,6 @@ REFEREE = "referee"
 
 _ID_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
-EstimateRole = Literal["tl", "isolated"]
 _ROLES = ("tl", "isolated")
 
 
@@ -49,8 +48,8 @@ def valid_id(value: str) -> bool:
     return isinstance(value, str) and _ID_RE.fullmatch(value) is not None
 
 
-def _seg(value: str, what: str, *, wildcard: bool = True) -> str:
-    if wildcard and value == ANY:
+def _seg(value: str, what: str) -> str:
+    if value == ANY:
         return value
     if not valid_id(value):
         raise ValueError(f"invalid {what} {value!r}: must match [A-Za-z0-9_-]{{1,64}}")
@@ -102,6 +101,11 @@ def primary_meas(e: str) -> str:
 def source_meas(sid: str, e: str) -> str:
     """Source ``sid``'s measurements."""
     return f"{ROOT}/source/{_seg(sid, 'source id')}/meas/{_seg(e, 'episode id')}"
+
+
+def meas(sensor: str, e: str) -> str:
+    """The measurements of ``sensor``: the primary's (:data:`PRIMARY`), or source ``sensor``'s."""
+    return primary_meas(e) if sensor == PRIMARY else source_meas(sensor, e)
 
 
 def transfer(sid: str, e: str) -> str:
@@ -161,6 +165,10 @@ HEARTBEATS = heartbeat(ANY)  #: ``tltrack/source/*/heartbeat``
 SOURCE_ESTIMATES = source_estimate(ANY, ANY)  #: tltrack/source/*/estimate/*
 PRIMARY_ESTIMATES = primary_estimate(ANY, ANY)  #: tltrack/primary/estimate/*/*
 ALIVE = f"{ROOT}/alive/**"  #: every liveliness token
+STATS = f"{ROOT}/**/stats/*"  #: every service's statistics
+#: what the referee's services (the scorer, the dashboard) read: liveliness aside, all they score
+#: or show
+REFEREE_READS = (EPISODES, TRUTHS, SOURCE_ESTIMATES, PRIMARY_ESTIMATES, STATS)
 
 
 # ---- parsing ----------------------------------------------------------------------------------

@@ -10,12 +10,15 @@ covariances. Its ``reason`` is a short code from :data:`REASONS`, suitable as a 
 On receipt validation is *strict* (no ``"1.5"`` -> 1.5, no ``True`` -> 1); constructing a model
 in code is lax, so a sender may pass NumPy arrays and scalars.
 
-:class:`RejectCounter` counts rejections per key and reason. Replays are refused where the
-state lives: a tracker's step queue, the scorer's SQLite keys.
+:func:`decode_stats` takes a service's statistics, JSON rather than msgpack (the dashboard and
+``zenoh-cli`` show them as they are). :class:`RejectCounter` counts rejections per key and
+reason. Replays are refused where the state lives: a tracker's step queue, the scorer's SQLite
+keys.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, TypeVar
@@ -612,3 +615,17 @@ class RejectCounter:
                 "by_reason": dict(self._by_reason),
                 "by_key": dict(self._by_key),
             }
+
+
+def decode_stats(payload: bytes) -> dict[str, Any]:
+    """A service's statistics (JSON, :meth:`~tltrack.live.service.Service.publish_stats`): an
+    object of at most :data:`MAX_PAYLOAD_BYTES`; else :class:`ValueError`, saying why."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"{len(payload)} B > {MAX_PAYLOAD_BYTES} B")
+    try:
+        data = json.loads(payload)
+    except RecursionError:  # absurdly nested
+        raise ValueError("nested too deeply") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"a JSON {type(data).__name__}, not an object")
+    return data

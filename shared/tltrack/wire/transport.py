@@ -244,12 +244,11 @@ class ZenohSettings(BaseSettings):
         return json.dumps(tree, indent=2) + "\n"
 
 
-def open_session(settings: ZenohSettings | None = None) -> zenoh.Session:
+def open_session(settings: ZenohSettings) -> zenoh.Session:
     """Open a session; use it as ``with open_session(s) as session:`` so it is always closed.
 
     A client with ``connect_timeout_ms == -1`` blocks here until its router is reachable.
     """
-    settings = settings or ZenohSettings()
     return zenoh.open(settings.to_config())
 
 
@@ -306,10 +305,11 @@ class _BoundedQueue:
                 self._cv.wait(remaining)
             return self._items.popleft()
 
-    def drain(self, max_items: int | None) -> list[Received]:
+    def drain(self) -> list[Received]:
         with self._cv:
-            n = len(self._items) if max_items is None else min(max_items, len(self._items))
-            return [self._items.popleft() for _ in range(n)]
+            items = list(self._items)
+            self._items.clear()
+            return items
 
     def close(self) -> None:
         with self._cv:
@@ -378,9 +378,9 @@ class Subscriber:
         """The next sample, waiting up to ``timeout`` s (forever if None); None on timeout/close."""
         return self._queue.pop(timeout)
 
-    def drain(self, max_items: int | None = None) -> list[Received]:
-        """Everything queued now (at most ``max_items``), without waiting."""
-        return self._queue.drain(max_items)
+    def drain(self) -> list[Received]:
+        """Everything queued now, without waiting."""
+        return self._queue.drain()
 
     def recv_message(
         self,
@@ -611,10 +611,6 @@ class LivelinessWatcher:
     def alive(self) -> frozenset[str]:
         with self._cv:
             return frozenset(self._alive)
-
-    def is_alive(self, key: str) -> bool:
-        with self._cv:
-            return key in self._alive
 
     def wait_until(self, key: str, alive: bool = True, timeout: float | None = None) -> bool:
         """Wait until ``key`` is (or is no longer) alive; False on timeout."""
