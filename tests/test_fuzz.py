@@ -229,7 +229,7 @@ def _bytes_level(rnd: random.Random, kind: str) -> bytes:
         return bytes(b)
     if how == 3:
         return _pack(rnd.choice([[1, 2], 3, "measurement", None, 1.5, True, [TEMPLATES.get(kind)]]))
-    if how == 4:  # headers announcing 4 G entries, nesting 100 000 deep
+    if how == 4:  # headers announcing 4 G entries, nesting 100 000 deep (msgpack, or JSON)
         return rnd.choice(
             [
                 b"\xdd\xff\xff\xff\xff",
@@ -237,6 +237,7 @@ def _bytes_level(rnd: random.Random, kind: str) -> bytes:
                 b"\xdb\xff\xff\xff\xff",
                 b"\x91" * 100_000 + b"\x00",
                 b"\x81\xa1a" * 5000 + b"\x00",
+                b"[" * 100_000,
             ]
         )
     return _pack({**TEMPLATES.get(kind, {}), "x": msgpack.ExtType(5, b"ext")})
@@ -255,7 +256,7 @@ def _rejected(payload: bytes, kind: str) -> bool:
     if kind == "stats":  # the scorer keeps any JSON object up to the size limit
         try:
             return len(payload) > MAX_PAYLOAD_BYTES or not isinstance(json.loads(payload), dict)
-        except ValueError:
+        except (ValueError, RecursionError):
             return True
     try:
         decode(payload, EXPECTED[kind])
@@ -364,6 +365,18 @@ def test_each_handler_counts_every_malformed_payload_once(
 
 
 # Gaps this file found in the services, now closed: each test pins its fix.
+
+
+@pytest.mark.unit
+def test_the_scorer_counts_statistics_nested_too_deeply(
+    handlers: dict[str, tuple[Any, Offline]],
+) -> None:
+    """JSON nested 100 000 deep makes json.loads recurse out of the stack: a RecursionError,
+    which the scorer let through its loop (the dashboard caught it)."""
+    scorer, svc = handlers["scorer"]
+    before = svc.rejects.total
+    scorer.handle(received(keys.stats("primary", "primary_tracker"), b"[" * 100_000))
+    assert svc.rejects.total == before + 1
 
 
 @pytest.mark.unit

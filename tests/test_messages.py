@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import threading
 from typing import Any
 
@@ -32,6 +33,7 @@ from tltrack.wire.messages import (
     Transfer,
     Truth,
     decode,
+    decode_stats,
     encode,
 )
 
@@ -582,3 +584,19 @@ def test_a_truth_carries_the_simulated_scan_one_flag_per_detection() -> None:
          "scan_too_large"),
     ]:  # fmt: skip
         assert reject(pack({**d, **change}), Truth) == reason, change
+
+
+@pytest.mark.parametrize(
+    ("payload", "said"),
+    [
+        (b"[1, 2]", "a JSON list, not an object"),
+        (b"[" * 100_000, "nested too deeply"),  # json.loads recurses: a RecursionError
+        (b'{"a": "' + b"x" * MAX_PAYLOAD_BYTES + b'"}', f"> {MAX_PAYLOAD_BYTES} B"),
+        (b"\xff", "can't decode byte 0xff"),
+        (b"{", "Expecting property name"),
+    ],
+)
+def test_service_statistics_are_a_json_object_of_bounded_size(payload: bytes, said: str) -> None:
+    with pytest.raises(ValueError, match=re.escape(said)):
+        decode_stats(payload)
+    assert decode_stats(b'{"steps": 3}') == {"steps": 3}
