@@ -86,11 +86,11 @@ def test_a_stall_holds_the_bytes_and_the_rate_spaces_them():
         client = dial(link)
         far, _ = server.accept()
         far.settimeout(0.3)
-        link.stall()
+        link.shape(stalled=True)  # every byte held, both ways; connections stay open
         client.sendall(b"held")
         with pytest.raises(TimeoutError):
             far.recv(4)
-        link.resume()
+        link.shape(stalled=False)
         far.settimeout(5)
         assert receive(far, 4) == b"held"
         link.shape(rate_bps=400e3)  # 20 kB: 0.4 s

@@ -136,12 +136,8 @@ def test_parse_round_trips() -> None:
     assert keys.parse(keys.primary_estimate("isolated", "e3")).role == "isolated"
     info = keys.parse(keys.alive("source/s1", "source_tracker"))
     assert (info.operator, info.service) == ("source/s1", "source_tracker")
-    assert keys.episode_of(keys.transfer("s1", "e42")) == "e42"
-    assert keys.source_of(keys.transfer("s7", "e42")) == "s7"
-    with pytest.raises(ValueError):
-        keys.episode_of(keys.SCORER_SUMMARY)
-    with pytest.raises(ValueError):
-        keys.source_of(keys.primary_meas("e1"))
+    info = keys.parse(keys.SCORER_SUMMARY)
+    assert info.episode is None and info.source is None
 
 
 @pytest.mark.parametrize(
@@ -695,7 +691,8 @@ def test_decode_of_a_received_sample_is_the_only_entry(router: str) -> None:
         put_once_subscribed(a, key, encode(msg))
         r = sub.recv(10)
         assert r is not None and decode(r.payload, Transfer) == msg
-        assert keys.source_of(r.key) == "s1" and keys.episode_of(r.key) == "dec"
+        info = keys.parse(r.key)
+        assert (info.source, info.episode) == ("s1", "dec")
 
 
 @pytest.mark.integration

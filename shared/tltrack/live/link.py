@@ -127,13 +127,6 @@ class LinkEmulator:
         with self._lock:
             return dict(self._shapes)
 
-    def stall(self) -> None:
-        """Hold every byte, both ways, until :meth:`resume`; connections stay open."""
-        self.shape(stalled=True)
-
-    def resume(self) -> None:
-        self.shape(stalled=False)
-
     @property
     def is_cut(self) -> bool:
         return self._cut.is_set()

@@ -246,19 +246,3 @@ def parse(key: str) -> KeyInfo:
         if n == 5 and p[2] == "source":
             return KeyInfo("alive", source=p[3], operator=f"source/{p[3]}", service=p[4])
     raise ValueError(f"unknown tltrack key layout: {key!r}")
-
-
-def episode_of(key: str) -> str:
-    """The episode id in a data key; ``ValueError`` if the key carries none."""
-    info = parse(key)
-    if info.episode is None:
-        raise ValueError(f"key has no episode id: {key!r}")
-    return info.episode
-
-
-def source_of(key: str) -> str:
-    """The source id in a source-owned key; ``ValueError`` if the key names no source."""
-    info = parse(key)
-    if info.source is None:
-        raise ValueError(f"key names no source: {key!r}")
-    return info.source
