@@ -118,45 +118,19 @@ def _stonesoup_stepper(
 ) -> Callable[[int], Any] | None:
     """One Stone Soup PF step per call ``step(k)`` on the primary's z_k; None without Stone Soup."""
     try:
-        from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
-        from stonesoup.models.transition.nonlinear import ConstantTurn
-        from stonesoup.predictor.particle import ParticlePredictor
         from stonesoup.resampler.particle import SystematicResampler
-        from stonesoup.types.array import StateVector, StateVectors
-        from stonesoup.types.detection import Detection
         from stonesoup.types.hypothesis import SingleHypothesis
-        from stonesoup.types.state import ParticleState
         from stonesoup.updater.particle import ParticleUpdater
+        from tltrack.perf.stonesoup_anchor import anchor
     except ImportError:
         return None
-    import datetime
-
-    np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
-    cfg = setup.cfg
-    s, R = setup.sensor(PRIMARY), setup.sensors[PRIMARY].R
-    meas = CartesianToBearingRange(
-        ndim_state=5,
-        mapping=(0, 2),
-        noise_covar=np.diag([R[1, 1], R[0, 0]]),  # [bearing, range]
-        translation_offset=StateVector([s.position[0], s.position[1]]),
-    )
-    predictor = ParticlePredictor(
-        ConstantTurn(linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2)
-    )
-    updater = ParticleUpdater(meas, resampler=SystematicResampler())
-    t0 = datetime.datetime(2025, 1, 1)
-    sd0 = np.sqrt(np.asarray(cfg.P0_diag))[:, None]
-    particles = x0_hat[:, None] + sd0 * np.random.standard_normal((len(x0_hat), N))
-    state: list[Any] = [
-        ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)), timestamp=t0)
-    ]
+    ss = anchor(setup, x0_hat, N, seed)
+    updater = ParticleUpdater(ss.radar, resampler=SystematicResampler())
+    state: list[Any] = [ss.prior]
 
     def step(k: int) -> Any:
-        t = t0 + datetime.timedelta(seconds=k * cfg.Ts)
-        pred = predictor.predict(state[0], timestamp=t)
-        zk = StateVector([z[k - 1, 1], z[k - 1, 0]])  # [bearing, range]
-        det = Detection(zk, timestamp=t, measurement_model=meas)
-        state[0] = updater.update(SingleHypothesis(pred, det))
+        pred = ss.predictor.predict(state[0], timestamp=ss.at(k))
+        state[0] = updater.update(SingleHypothesis(pred, ss.detection(z[k - 1, 0], z[k - 1, 1], k)))
         return state[0].mean, state[0].covar
 
     return step

@@ -49,46 +49,25 @@ def stonesoup_elpf(
         from stonesoup.deleter import Deleter
         from stonesoup.hypothesiser.probability import PDAHypothesiser
         from stonesoup.initiator import Initiator
-        from stonesoup.models.measurement.nonlinear import CartesianToBearingRange
-        from stonesoup.models.transition.nonlinear import ConstantTurn
-        from stonesoup.predictor.particle import ParticlePredictor
         from stonesoup.tracker.particle import SingleTargetExpectedLikelihoodParticleFilter
-        from stonesoup.types.array import StateVector, StateVectors
-        from stonesoup.types.detection import Detection as SSDetection
-        from stonesoup.types.state import ParticleState
         from stonesoup.types.track import Track
         from stonesoup.updater.particle import ParticleUpdater
+        from tltrack.perf.stonesoup_anchor import T0, anchor
     except ImportError:
         return None
-    import datetime
-
-    np.random.seed(seed)  # Stone Soup draws from NumPy's global generator
-    cfg, own = setup.cfg, setup.sensors[PRIMARY]
-    meas = CartesianToBearingRange(
-        ndim_state=5,
-        mapping=(0, 2),
-        noise_covar=np.diag([own.R[1, 1], own.R[0, 0]]),  # [bearing, range]
-        translation_offset=StateVector(list(own.model.position)),
-    )
-    predictor = ParticlePredictor(
-        ConstantTurn(linear_noise_coeffs=np.array([cfg.q1, cfg.q1]), turn_noise_coeff=cfg.q2)
-    )
-    updater = ParticleUpdater(meas, resampler=None)
-    t0 = datetime.datetime(2025, 1, 1)
-    sd0 = np.sqrt(np.asarray(cfg.P0_diag))[:, None]
-    particles = x0_hat[:, None] + sd0 * np.random.standard_normal((len(x0_hat), N))
-    start = ParticleState(StateVectors(particles), log_weight=np.full(N, -np.log(N)), timestamp=t0)
+    ss = anchor(setup, x0_hat, N, seed)
+    updater = ParticleUpdater(ss.radar, resampler=None)
 
     class Given(Initiator):
         def initiate(self, detections: Any, timestamp: Any, **kwargs: Any) -> set[Any]:
-            return {Track([start])}
+            return {Track([ss.prior])}
 
     class Never(Deleter):
         def check_for_deletion(self, track: Any, **kwargs: Any) -> bool:
             return False
 
     scans: list[tuple[Any, set[Any]]] = []
-    hyp = PDAHypothesiser(predictor, updater, density, prob_detect=1.0, prob_gate=0.99)
+    hyp = PDAHypothesiser(ss.predictor, updater, density, prob_detect=1.0, prob_gate=0.99)
     tracker = SingleTargetExpectedLikelihoodParticleFilter(
         initiator=Given(),
         deleter=Never(),
@@ -96,14 +75,12 @@ def stonesoup_elpf(
         data_associator=PDA(hyp),
         updater=updater,
     )
-    scans.append((t0, set()))  # the first call initiates the track at t0
+    scans.append((T0, set()))  # the first call initiates the track at T0
     steps = iter(tracker)
     next(steps)
 
     def step(k: int, Z: np.ndarray) -> np.ndarray:
-        t = t0 + datetime.timedelta(seconds=k * cfg.Ts)
-        dets = {SSDetection(StateVector([b, r]), timestamp=t, measurement_model=meas) for r, b in Z}
-        scans.append((t, dets))
+        scans.append((ss.at(k), {ss.detection(r, b, k) for r, b in Z}))
         _, tracks = next(steps)
         return np.asarray(next(iter(tracks)).state.mean, dtype=float).ravel()
 
