@@ -27,38 +27,19 @@ import argparse
 import csv
 import io
 import itertools
-import math
 import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
+from course_range import course_range_deg
 from tracktable_wheel import read_member
 
 MEMBER = "tracktable_data/python_example_data/NYHarbor_2020_06_30_first_hour.csv"
 MIN_SPAN_S = 30 * 60.0
 MAX_GAP_S = 120.0
 MIN_SOG_KN = 2.0
-
-
-def course(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
-    """Initial great-circle bearing from point 1 to point 2, radians clockwise from north."""
-    p1, p2, dl = math.radians(lat1), math.radians(lat2), math.radians(lon2 - lon1)
-    y = math.sin(dl) * math.cos(p2)
-    x = math.cos(p1) * math.sin(p2) - math.sin(p1) * math.cos(p2) * math.cos(dl)
-    return math.atan2(y, x)
-
-
-def course_range_deg(rows: list[dict[str, str]]) -> float:
-    """Range (max - min) of the unwrapped course between consecutive reports, in degrees."""
-    pts = [(float(r["LAT"]), float(r["LON"])) for r in rows]
-    c = [course(*a, *b) for a, b in itertools.pairwise(pts)]
-    unwrapped = [c[0]]
-    for prev, cur in itertools.pairwise(c):
-        d = (cur - prev + math.pi) % (2 * math.pi) - math.pi
-        unwrapped.append(unwrapped[-1] + d)
-    return math.degrees(max(unwrapped) - min(unwrapped))
 
 
 @dataclass
@@ -100,7 +81,7 @@ def candidates(text: str) -> list[Vessel]:
                 span,
                 max(gaps),
                 (min(sog), max(sog)),
-                course_range_deg(rows),
+                course_range_deg([(float(r["LAT"]), float(r["LON"])) for r in rows]),
             )
         )
     out.sort(key=lambda v: -v.course_range_deg)

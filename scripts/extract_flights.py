@@ -30,13 +30,13 @@ import argparse
 import csv
 import io
 import itertools
-import math
 import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
+from course_range import course_range_deg
 from tracktable_wheel import read_member
 
 MEMBER = "tracktable_data/python_example_data/SampleFlightsUS.csv"
@@ -44,14 +44,6 @@ WINDOW_S = 1200.0
 MAX_GAP_S = 120.0
 LANDED_FT = 1000.0
 COUNT = 5
-
-
-def course(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
-    """Initial great-circle bearing from point 1 to point 2, radians clockwise from north."""
-    p1, p2, dl = math.radians(lat1), math.radians(lat2), math.radians(lon2 - lon1)
-    y = math.sin(dl) * math.cos(p2)
-    x = math.cos(p1) * math.sin(p2) - math.sin(p1) * math.cos(p2) * math.cos(dl)
-    return math.atan2(y, x)
 
 
 @dataclass
@@ -78,17 +70,13 @@ def window(flight_id: str, rows: list[list[str]]) -> Flight | None:
     if len(rows) < 4 or max(gaps) > MAX_GAP_S or min(gaps) <= 0:
         return None
     points = [(float(r[3]), float(r[2])) for r in rows]  # the rows give longitude first
-    c = [course(*a, *b) for a, b in itertools.pairwise(points)]
-    unwrapped = [c[0]]
-    for prev, cur in itertools.pairwise(c):
-        unwrapped.append(unwrapped[-1] + (cur - prev + math.pi) % (2 * math.pi) - math.pi)
     return Flight(
         flight_id,
         times,
         points,
         max(gaps),
         float(rows[-1][4]),
-        math.degrees(max(unwrapped) - min(unwrapped)),
+        course_range_deg(points),
     )
 
 
