@@ -113,3 +113,13 @@ def test_each_source_router_brings_in_its_own_transfers_only(tmp_path) -> None:
     assert [(r["flows"], r["messages"], r["key_exprs"]) for r in allowed] == [
         (["egress"], ["put"], ["tltrack/schedule/*"])
     ]
+
+
+def test_the_demo_reads_its_progress_only_from_statistics_that_say_it() -> None:
+    """Without access control anyone may publish on sensor_sim's statistics key: a payload that
+    is not its statistics moves no bar and stops no demo (json.loads raised out of it)."""
+    from tltrack.live.supervisor import _steps_reported
+
+    assert _steps_reported(b'{"counters": {"steps": 7}, "rejects": {}}') == 7
+    for bad in (b"[", b"[" * 100_000, b'{"counters": 3}', b'{"counters": {"steps": "7"}}', b"{}"):
+        assert _steps_reported(bad) is None, bad

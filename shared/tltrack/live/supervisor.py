@@ -40,6 +40,7 @@ from tltrack.live.manifest import ENV as MANIFEST_ENV
 from tltrack.live.topology import Topology
 from tltrack.live.topology import free_port as free_port
 from tltrack.wire import keys
+from tltrack.wire.messages import decode_stats
 from tltrack.wire.transport import Publisher, Subscriber, ZenohSettings, open_session, query
 
 #: the signals that stop a command and every process it started
@@ -418,6 +419,16 @@ def wait_for_scored(
     return None
 
 
+def _steps_reported(payload: bytes) -> int | None:
+    """The steps a service's statistics count; None if they do not say (or are no statistics:
+    without access control anyone may publish on the key)."""
+    try:
+        steps = decode_stats(payload).get("counters", {}).get("steps")
+    except (ValueError, AttributeError):  # counters that are no object
+        return None
+    return steps if isinstance(steps, int) else None
+
+
 def wait_for_episode(stack: Stack, timeout: float, on_step: Callable[[int], None]) -> int | None:
     """Wait up to ``timeout`` for sensor_sim to end its episode, telling ``on_step`` of each step
     it reports (its statistics, once a second, read as the referee); its exit code, or None."""
@@ -429,8 +440,8 @@ def wait_for_episode(stack: Stack, timeout: float, on_step: Callable[[int], None
     ):
         while (code := sim.poll()) is None and time.monotonic() < deadline:
             item = stats.recv(0.2)
-            if item is not None:
-                on_step(int(json.loads(item.payload).get("counters", {}).get("steps", 0)))
+            if item is not None and (steps := _steps_reported(item.payload)) is not None:
+                on_step(steps)
     return code if code is not None else stack.wait("sensor_sim", 0.0)
 
 
