@@ -11,8 +11,8 @@ relay forwards each connection to the other router, shaping each direction:
   no chunk overtakes the one before it: the gap between two arrivals may grow or shrink by up to
   twice the jitter.
 - **rate** ``rate_bps``: a chunk leaves no sooner than the previous one's bits have at that rate.
-- **stall**: nothing is forwarded, connections stay open (a link that goes silent: Zenoh notices
-  only after its lease); what was held goes on at :meth:`~LinkEmulator.resume`.
+- **stall** ``stalled``: nothing is forwarded, connections stay open (a link that goes silent:
+  Zenoh notices only after its lease); what was held goes on once ``stalled`` is false again.
 - **cut**: every connection is closed and new ones are refused until
   :meth:`~LinkEmulator.restore` (a link that is gone: Zenoh notices at once and redials).
 

@@ -104,7 +104,7 @@ def source_meas(sid: str, e: str) -> str:
 
 
 def meas(sensor: str, e: str) -> str:
-    """The measurements of ``sensor``: the primary's (:data:`PRIMARY`), or source ``sensor``'s."""
+    """The measurements of ``sensor``: the primary's (``"primary"``), or source ``sensor``'s."""
     return primary_meas(e) if sensor == PRIMARY else source_meas(sensor, e)
 
 
