@@ -59,6 +59,8 @@ class ServiceSettings(BaseSettings):
 
 
 S = TypeVar("S", bound=BaseSettings)
+#: how often a service publishes its statistics (the dashboard's health panel, the demo's bar) [s]
+STATS_EVERY_S = 1.0
 
 
 def load_settings(cls: type[S], argv: list[str] | None = None) -> S:
@@ -212,8 +214,8 @@ class Service:
             self.rejects.add(item.key, "bad_key")
             return None
 
-    def count(self, what: str, n: int = 1) -> None:
-        self.counters[what] = self.counters.get(what, 0) + n
+    def count(self, what: str) -> None:
+        self.counters[what] = self.counters.get(what, 0) + 1
 
     def stats(self) -> dict[str, Any]:
         return {
@@ -226,10 +228,10 @@ class Service:
             **self.status,
         }
 
-    def publish_stats(self, every: float = 1.0, force: bool = False) -> None:
-        """Publish :meth:`stats` as JSON at most once per ``every`` seconds."""
+    def publish_stats(self, force: bool = False) -> None:
+        """Publish :meth:`stats` as JSON at most once per :data:`STATS_EVERY_S` (``force``: now)."""
         now = time.monotonic()
-        if self._stats_pub is not None and (force or now - self._last_stats >= every):
+        if self._stats_pub is not None and (force or now - self._last_stats >= STATS_EVERY_S):
             self._stats_pub.put(json.dumps(self.stats()).encode())
             self._last_stats = now
 
