@@ -12,8 +12,13 @@ from pathlib import Path
 from typing import Any
 
 from tltrack.live import supervisor
+from tltrack.services.dashboard import launch
+from tltrack.services.sensor_sim.simulator import WAIT_FOR
 
 SIM_DEFAULTS = {"preset": "arasaratnam-haykin", "truth": "fixed", "seed": 7}
+#: what sensor_sim awaits beside a dashboard: the default stack's services and the page, so that
+#: no step is missed
+WAIT_WITH_DASHBOARD = [*WAIT_FOR, launch.TOKEN]
 
 
 @contextlib.contextmanager

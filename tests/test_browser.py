@@ -20,10 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from livestack import logs, sim_flags, stack
+from livestack import WAIT_WITH_DASHBOARD, logs, sim_flags, stack
 from tltrack.live import supervisor
 from tltrack.services.dashboard import launch
-from tltrack.services.sensor_sim.simulator import WAIT_FOR
 from tltrack.wire import keys
 from tltrack.wire.transport import LivelinessWatcher
 
@@ -34,7 +33,6 @@ CHROMEDRIVER = Path("/usr/bin/chromedriver")
 ROOT = Path(__file__).resolve().parents[1]
 ARTIFACT = ROOT / "out" / "artifacts" / "dashboard.png"
 COMMITTED = ROOT / "docs" / "dashboard.png"
-WAIT = [*WAIT_FOR, launch.TOKEN]  #: sensor_sim awaits the page too: no step missed
 K, PACE = 60, 10.0  # six seconds of episode: plenty of polls to see it grow
 #: false alarms over a sector around the track, so that some fall inside the plot every scan
 CLUTTER = {
@@ -136,12 +134,12 @@ def test_the_page_draws_the_episode_and_its_clutter_as_it_runs(
         s.start_service("source_tracker")
         page = launch.start(s, port)
         with supervisor.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
-            for who in WAIT:  # startup is the services' business, not the page's
+            for who in WAIT_WITH_DASHBOARD:  # startup is the services' business, not the page's
                 assert w.wait_until(keys.alive(*who.split(":")), True, 60), f"{who}\n{logs(s)}"
         assert launch.wait_ready(page, 10), logs(s)
         browser.get(page)
         flags = [*sim_flags(K, 500, pace=PACE), "--config", str(given)]
-        s.start_service("sensor_sim", *flags, env=supervisor.sim_env(WAIT))
+        s.start_service("sensor_sim", *flags, env=supervisor.sim_env(WAIT_WITH_DASHBOARD))
 
         def look() -> dict[str, Any]:
             """What the page shows, read in one script: the DOM is rebuilt on every poll."""

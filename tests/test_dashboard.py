@@ -16,7 +16,7 @@ from typing import Any
 import msgpack
 import pytest
 import zenoh
-from livestack import logs, sim_flags, stack, wait_until
+from livestack import WAIT_WITH_DASHBOARD, logs, sim_flags, stack, wait_until
 from prometheus_client import generate_latest
 from prometheus_client.parser import text_string_to_metric_families
 from tltrack.config import make_config
@@ -27,7 +27,6 @@ from tltrack.services.dashboard.metrics import Metrics
 from tltrack.services.dashboard.server import main
 from tltrack.services.dashboard.state import State, clean_stats
 from tltrack.services.dashboard.web import WebServer, create_app
-from tltrack.services.sensor_sim.simulator import WAIT_FOR
 from tltrack.wire import keys
 from tltrack.wire.messages import (
     EpisodeStart,
@@ -40,7 +39,6 @@ from tltrack.wire.messages import (
 from tltrack.wire.transport import LivelinessWatcher, Received
 
 E = "ep-r0"
-WAIT = [*WAIT_FOR, launch.TOKEN]  #: sensor_sim awaits the page too: no step missed
 EYE = [[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]]
 
 # ---- helpers ----------------------------------------------------------------------------------
@@ -317,8 +315,13 @@ def test_bad_settings_stop_the_dashboard_naming_the_field(capsys):
 def test_sensor_sim_can_wait_for_the_dashboard_too(monkeypatch: pytest.MonkeyPatch) -> None:
     from tltrack.services.sensor_sim.simulator import Settings as SimSettings
 
-    monkeypatch.setenv("TLTRACK_SIM_WAIT_FOR", supervisor.sim_env(WAIT)["TLTRACK_SIM_WAIT_FOR"])
-    assert SimSettings().wait_for == WAIT and WAIT[-1] == "referee:dashboard"
+    monkeypatch.setenv(
+        "TLTRACK_SIM_WAIT_FOR", supervisor.sim_env(WAIT_WITH_DASHBOARD)["TLTRACK_SIM_WAIT_FOR"]
+    )
+    assert (
+        SimSettings().wait_for == WAIT_WITH_DASHBOARD
+        and WAIT_WITH_DASHBOARD[-1] == "referee:dashboard"
+    )
     assert launch.url(8050, "0.0.0.0") == "http://127.0.0.1:8050/"
     assert launch.env(9000)["TLTRACK_DASHBOARD_PORT"] == "9000"
 
@@ -374,12 +377,14 @@ def test_a_live_episode_shows_on_the_page_and_in_metrics_as_the_scorer_scores_it
         s.start_service("source_tracker")
         launch.start(s, port)
         with supervisor.client(s.endpoint) as session, LivelinessWatcher(session, keys.ALIVE) as w:
-            for who in WAIT:
+            for who in WAIT_WITH_DASHBOARD:
                 assert w.wait_until(keys.alive(*who.split(":")), True, 60), logs(s)
             for payload in GARBAGE:
                 session.put(keys.truth(E), payload)
                 session.put(keys.primary_meas(E), payload)
-        s.start_service("sensor_sim", *sim_flags(K, 500, pace=0), env=supervisor.sim_env(WAIT))
+        s.start_service(
+            "sensor_sim", *sim_flags(K, 500, pace=0), env=supervisor.sim_env(WAIT_WITH_DASHBOARD)
+        )
         assert s.wait("sensor_sim", 60) == 0, logs(s)
         assert supervisor.wait_for_scored(s.endpoint, 1, 30) is not None, logs(s)
         assert wait_until(settled, 15), f"{state()}\n{logs(s)}"

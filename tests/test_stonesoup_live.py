@@ -53,7 +53,7 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
             Subscriber(z, [keys.PRIMARY_MEAS]) as meas,
             TransferReader(session=z, count=K - 1, idle_s=60.0, **CT) as reader,
         ):
-            only_the_source = {"TLTRACK_SIM_WAIT_FOR": '["source/s1:source_tracker"]'}
+            only_the_source = supervisor.sim_env(["source/s1:source_tracker"])
             start_service(s, "sensor_sim", *sim_flags(K, 100, pace=20), env=only_the_source)
             got = episodes.recv_message(EpisodeStart, timeout=90)
             assert got is not None, logs(s)

@@ -123,3 +123,15 @@ def test_the_demo_reads_its_progress_only_from_statistics_that_say_it() -> None:
     assert _steps_reported(b'{"counters": {"steps": 7}, "rejects": {}}') == 7
     for bad in (b"[", b"[" * 100_000, b'{"counters": 3}', b'{"counters": {"steps": "7"}}', b"{}"):
         assert _steps_reported(bad) is None, bad
+    for count in (b"true", b"-1", b"7.5"):  # counted as the dashboard counts: whole, >= 0
+        assert _steps_reported(b'{"counters": {"steps": ' + count + b"}}") is None, count
+
+
+def test_the_scorer_summary_is_read_only_from_a_reply_that_is_one() -> None:
+    """A reply on the summary key that is not the scorer's summary is passed over: it ended
+    `tltrack demo` (and every wait for an episode) with a traceback."""
+    from tltrack.live.supervisor import _summary
+
+    assert _summary(b'{"episodes": [{"scored": true}]}') == {"episodes": [{"scored": True}]}
+    for bad in (b"", b"[1]", b"[" * 100_000, b'{"episodes": 3}', b"\xff"):
+        assert _summary(bad) is None, bad

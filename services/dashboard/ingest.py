@@ -99,5 +99,4 @@ class Ingest:
         except ValueError:
             self.rejects.add(item.key, "bad_stats")
             return
-        if not self.state.on_stats(operator, service, raw):
-            self.rejects.add(item.key, "bad_stats")
+        self.state.on_stats(operator, service, raw)

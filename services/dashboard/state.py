@@ -168,10 +168,9 @@ def _link_map(value: Any) -> dict[str, str]:
     return out
 
 
-def clean_stats(raw: Any) -> dict[str, Any] | None:
-    """The parts of a service's statistics the dashboard uses, or None if it is not an object."""
-    if not isinstance(raw, dict):
-        return None
+def clean_stats(raw: dict[str, Any]) -> dict[str, Any]:
+    """The parts of a service's statistics (an object: :func:`~tltrack.wire.messages.decode_stats`)
+    the dashboard uses, each of the type it expects or left out."""
     rejected = raw.get("rejected")
     if not isinstance(rejected, dict):
         rejected = {}
@@ -307,18 +306,15 @@ class State:
                 h.alive, h.changed = alive, time.time()
                 self.version += 1
 
-    def on_stats(self, operator: str, service: str, raw: Any) -> bool:
-        """Record a service's statistics; False if they are not a JSON object."""
+    def on_stats(self, operator: str, service: str, raw: dict[str, Any]) -> None:
+        """Record a service's statistics."""
         stats = clean_stats(raw)
-        if stats is None:
-            return False
         with self._lock:
             h = self._health(operator, service)
             if h is not None:
                 if h.stats != stats:
                     self.version += 1
                 h.stats, h.stats_at = stats, time.time()
-        return True
 
     def _health(self, operator: str, service: str) -> ServiceHealth | None:
         name = f"{operator}/{service}"

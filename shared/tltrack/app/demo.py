@@ -88,7 +88,7 @@ def demo(
     try:
         with d.stop_on_signals():
             summary = _run_demo(
-                d, cfg, flags, pace, realtime, out, serve, port, host, topology, manifest
+                cfg, flags, pace, realtime, out, serve, port, host, topology, manifest
             )
     except d.Interrupted as stop:
         console.print(f"stopped by {stop}; the router and every service are stopped")
@@ -99,7 +99,6 @@ def demo(
 
 
 def _run_demo(
-    d: Any,
     cfg: Config,
     sim_flags: list[str],
     pace: float,
@@ -114,7 +113,9 @@ def _run_demo(
     """One episode on a fresh stack; the scorer's summary, with ``access_control`` and
     ``topology`` set."""
     from tltrack.filters.warm import warm_up
+    from tltrack.live import supervisor as d
     from tltrack.live import topology
+    from tltrack.live.access import ACCESS_DIR
     from tltrack.live.summary import print_summary
 
     topo = topology.build(kind, [s.id for s in cfg.sources])
@@ -124,7 +125,7 @@ def _run_demo(
         Path(f"{db}{suffix}").unlink(missing_ok=True)
     console.print(
         f"{kind} topology, routers: {topology.describe(topo)} (access control: "
-        f"{d.ACCESS_DIR}); logs in {out / 'logs'}"
+        f"{ACCESS_DIR}); logs in {out / 'logs'}"
     )
     warm_up()  # compile the kernels once here, not in several services at once
     with d.Stack(endpoint, out / "logs", True, topology=topo, manifest_file=manifest) as stack:

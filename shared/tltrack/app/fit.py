@@ -76,6 +76,8 @@ def fit(
 
 #: how far past an estimate or an interval's end :func:`past_the_grid` looks [decades]
 BEYOND = 0.1
+#: a rise in log-likelihood smaller than this is round-off on a flat likelihood, not a maximum
+TOLERANCE = 1e-3
 
 
 def past_the_grid(tracks: Any, result: Any) -> list[str]:
@@ -86,8 +88,10 @@ def past_the_grid(tracks: Any, result: Any) -> list[str]:
     a maximum or an interval end beyond it: real tracks reach its edges (an anchored ship's q1, a
     simulated track's sigma near 0). The likelihood :data:`BEYOND` past the value, the other
     parameter held at its estimate, is at most the profile's there, so each warning is sure: the
-    maximum, or the interval, lies further out. ``modes`` and ``manoeuvres`` take q1_straight
-    from the cv fit, which is checked for them; ``ct`` is searched without a grid.
+    maximum, or the interval, lies further out (the interval's level taken from the higher of
+    the grid's best and the estimate's likelihood, the stricter). ``modes`` and ``manoeuvres``
+    take q1_straight from the cv fit, which is checked for them; ``ct`` is searched without a
+    grid.
     """
     from scipy.stats import chi2
 
@@ -97,7 +101,7 @@ def past_the_grid(tracks: Any, result: Any) -> list[str]:
         return []
     cv = result if result.kind == "cv" else fitting.fit(tracks, "cv")
     shown = {"q1": "q1", "sigma": "sigma"} if result.kind == "cv" else {"q1": "q1_straight"}
-    level = cv.loglik - float(chi2.ppf(0.95, 1)) / 2.0
+    half = float(chi2.ppf(0.95, 1)) / 2.0
     found = []
     for p, name in shown.items():
         v, (lo, hi) = cv.values[p], cv.intervals[p]
@@ -108,14 +112,14 @@ def past_the_grid(tracks: Any, result: Any) -> list[str]:
         top = max(cv.loglik, ll(v))  # the grid's best, or the estimate's between its points
         for side in (-1, 1):
             past = v * 10.0 ** (side * BEYOND)
-            if ll(past) > top:
+            if ll(past) > top + TOLERANCE:
                 found.append(
-                    f"{name} = {v:.4g} is the edge of the fit's grid, not the maximum: the "
-                    f"likelihood is higher at {past:.4g}"
+                    f"{name} = {v:.4g} is not the maximum: the likelihood is higher at "
+                    f"{past:.4g}, past the end of the fit's grid"
                 )
         for end, side in ((lo, -1), (hi, 1)):
             past = end * 10.0 ** (side * BEYOND)
-            if ll(past) >= level:
+            if ll(past) >= top - half:
                 found.append(
                     f"{name}'s 95% interval runs past {end:.4g}, where the fit's grid ends: "
                     f"it is wider than shown (the likelihood at {past:.4g} is still inside it)"

@@ -400,8 +400,21 @@ def fetch_summary(
 ) -> dict[str, Any] | None:
     with client(endpoint, user) as session:
         for r in query(session, keys.SCORER_SUMMARY, timeout):
-            return dict(json.loads(r.payload))
+            if (s := _summary(r.payload)) is not None:
+                return s
     return None
+
+
+def _summary(payload: bytes) -> dict[str, Any] | None:
+    """The scorer's summary in a reply; None if the reply is none (without access control any
+    session may answer on the key)."""
+    try:
+        s = json.loads(payload)
+    except (ValueError, RecursionError):
+        return None
+    if not isinstance(s, dict) or not isinstance(s.get("episodes", []), list):
+        return None
+    return s
 
 
 def wait_for_scored(
@@ -412,8 +425,9 @@ def wait_for_scored(
     with client(endpoint, user) as session:
         while time.monotonic() < deadline:
             for r in query(session, keys.SCORER_SUMMARY, 5.0):
-                s = dict(json.loads(r.payload))
-                if sum(1 for e in s.get("episodes", []) if e.get("scored")) >= episodes:
+                s = _summary(r.payload)
+                scored = [e for e in (s or {}).get("episodes", []) if isinstance(e, dict)]
+                if s is not None and sum(1 for e in scored if e.get("scored")) >= episodes:
                     return s
             time.sleep(0.2)
     return None
@@ -426,7 +440,7 @@ def _steps_reported(payload: bytes) -> int | None:
         steps = decode_stats(payload).get("counters", {}).get("steps")
     except (ValueError, AttributeError):  # counters that are no object
         return None
-    return steps if isinstance(steps, int) else None
+    return steps if type(steps) is int and steps >= 0 else None  # not True, not -1
 
 
 def wait_for_episode(stack: Stack, timeout: float, on_step: Callable[[int], None]) -> int | None:
