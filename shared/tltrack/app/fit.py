@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, cast
 
 import typer
 
 from tltrack.app.common import app, checked_file, console, say_error, say_warning
+
+if TYPE_CHECKING:  # the engine is imported when a command runs, not when the CLI starts
+    from tltrack.engine.fit import Fit, Kind, Reports
 
 
 @app.command(
@@ -80,7 +84,7 @@ BEYOND = 0.1
 TOLERANCE = 1e-3
 
 
-def past_the_grid(tracks: Any, result: Any) -> list[str]:
+def past_the_grid(tracks: Sequence[Reports], result: Fit) -> list[str]:
     """What the cv fit's grid cut off: an estimate with a higher likelihood past it, or a 95%
     interval still inside its level past its end.
 
@@ -127,7 +131,7 @@ def past_the_grid(tracks: Any, result: Any) -> list[str]:
     return found
 
 
-def config_text(result: Any, Ts: float) -> str:
+def config_text(result: Fit, Ts: float) -> str:
     """A config (TOML) with the fitted noise: the scenario's q1 (and q2), or the modes and their
     chain over one period Ts."""
     from tltrack.config.target_classes import transition, uniform_rates
@@ -139,7 +143,7 @@ def config_text(result: Any, Ts: float) -> str:
         return head + f'scenario = "cv"\nq1 = {v["q1"]:.6g}\n'
     if result.kind == "ct":
         return head + f'scenario = "ct"\nq1 = {v["q1"]:.6g}\nq2 = {v["q2"]:.6g}\n'
-    specs = mode_specs(result.kind, v)
+    specs = mode_specs(cast("Kind", result.kind), v)  # one of PARAMETERS, checked at the start
     Pi = transition(uniform_rates(len(specs), v["switch_rate"]), Ts)
     rows = ", ".join("[" + ", ".join(f"{p:.12g}" for p in row) + "]" for row in Pi)
     text = head + f'scenario = "ct"\nTs = {Ts:g}\nmode_transition = [{rows}]\n'
