@@ -38,6 +38,7 @@ from tltrack.wire.messages import (
     Transfer,
     Truth,
     decode_stats,
+    json_object,
 )
 from tltrack.wire.messages import decode as decode_message
 
@@ -97,10 +98,8 @@ def _json(key: str, kind: str, value: bytes) -> dict[str, Any]:
     """A service's statistics (an object, as the scorer and the dashboard take them), or the
     scorer's summary (a get's reply), passed through."""
     try:
-        data = decode_stats(value) if kind == "stats" else json.loads(value)
-        if not isinstance(data, dict):  # a summary is an object too
-            raise ValueError(f"a JSON {type(data).__name__}, not an object")
-    except (ValueError, RecursionError) as err:
+        data = decode_stats(value) if kind == "stats" else json_object(value)  # the summary
+    except ValueError as err:
         reason = "bad_stats" if kind == "stats" else "not_json"
         return {"key": key, "refused": reason, "detail": f"{type(err).__name__}: {err}"}
     return {"key": key, "kind": kind, "fields": data}

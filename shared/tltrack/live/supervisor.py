@@ -40,7 +40,7 @@ from tltrack.live.manifest import ENV as MANIFEST_ENV
 from tltrack.live.topology import Topology
 from tltrack.live.topology import free_port as free_port
 from tltrack.wire import keys
-from tltrack.wire.messages import decode_stats
+from tltrack.wire.messages import decode_stats, json_object
 from tltrack.wire.transport import Publisher, Subscriber, ZenohSettings, open_session, query
 
 #: the signals that stop a command and every process it started
@@ -409,12 +409,10 @@ def _summary(payload: bytes) -> dict[str, Any] | None:
     """The scorer's summary in a reply; None if the reply is none (without access control any
     session may answer on the key)."""
     try:
-        s = json.loads(payload)
-    except (ValueError, RecursionError):
+        s = json_object(payload)
+    except ValueError:
         return None
-    if not isinstance(s, dict) or not isinstance(s.get("episodes", []), list):
-        return None
-    return s
+    return s if isinstance(s.get("episodes", []), list) else None
 
 
 def wait_for_scored(
@@ -426,11 +424,15 @@ def wait_for_scored(
         while time.monotonic() < deadline:
             for r in query(session, keys.SCORER_SUMMARY, 5.0):
                 s = _summary(r.payload)
-                scored = [e for e in (s or {}).get("episodes", []) if isinstance(e, dict)]
-                if s is not None and sum(1 for e in scored if e.get("scored")) >= episodes:
+                if s is not None and _scored(s) >= episodes:
                     return s
             time.sleep(0.2)
     return None
+
+
+def _scored(summary: dict[str, Any]) -> int:
+    """How many of the summary's episodes are scored (an entry that is no object is none)."""
+    return sum(isinstance(e, dict) and bool(e.get("scored")) for e in summary.get("episodes", []))
 
 
 def _steps_reported(payload: bytes) -> int | None:

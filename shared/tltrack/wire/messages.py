@@ -617,11 +617,9 @@ class RejectCounter:
             }
 
 
-def decode_stats(payload: bytes) -> dict[str, Any]:
-    """A service's statistics (JSON, :meth:`~tltrack.live.service.Service.publish_stats`): an
-    object of at most :data:`MAX_PAYLOAD_BYTES`; else :class:`ValueError`, saying why."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise ValueError(f"{len(payload)} B > {MAX_PAYLOAD_BYTES} B")
+def json_object(payload: bytes) -> dict[str, Any]:
+    """A JSON object (a service's statistics, the scorer's summary); else :class:`ValueError`,
+    saying why, for any payload (json.loads raises RecursionError on deep nesting)."""
     try:
         data = json.loads(payload)
     except RecursionError:  # absurdly nested
@@ -629,3 +627,11 @@ def decode_stats(payload: bytes) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"a JSON {type(data).__name__}, not an object")
     return data
+
+
+def decode_stats(payload: bytes) -> dict[str, Any]:
+    """A service's statistics (JSON, :meth:`~tltrack.live.service.Service.publish_stats`): an
+    object of at most :data:`MAX_PAYLOAD_BYTES`; else :class:`ValueError`, saying why."""
+    if len(payload) > MAX_PAYLOAD_BYTES:
+        raise ValueError(f"{len(payload)} B > {MAX_PAYLOAD_BYTES} B")
+    return json_object(payload)
