@@ -23,7 +23,7 @@ from tltrack.engine.names import operator_of
 from tltrack.engine.setup import PRIMARY, sensor_spec
 from tltrack.filters import consistency
 from tltrack.live import latency
-from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth
+from tltrack.wire.messages import EpisodeEnd, EpisodeStart, EstimateMsg, Truth, counts
 
 Role = Literal["source", "tl", "isolated"]
 Verdict = Literal["new", "duplicate", "capacity"]
@@ -143,18 +143,6 @@ class ServiceHealth:
         return f"{self.operator}/{self.service}"
 
 
-def _count_map(value: Any) -> dict[str, int]:
-    """A ``{str: non-negative int}`` mapping from untrusted JSON, at most MAX_STATS_ENTRIES."""
-    out: dict[str, int] = {}
-    if isinstance(value, dict):
-        for key, n in value.items():
-            if len(out) >= MAX_STATS_ENTRIES:
-                break
-            if isinstance(key, str) and type(n) is int and n >= 0:
-                out[key[:256]] = n
-    return out
-
-
 def _link_map(value: Any) -> dict[str, str]:
     """The primary's link to each source, ``up`` or ``cut`` (tltrack.live.heartbeat), from
     untrusted JSON: anything else is left out."""
@@ -176,9 +164,9 @@ def clean_stats(raw: dict[str, Any]) -> dict[str, Any]:
         rejected = {}
     dropped = raw.get("dropped")
     return {
-        "counters": _count_map(raw.get("counters")),
-        "rejected_by_key": _count_map(rejected.get("by_key")),
-        "rejected_by_reason": _count_map(rejected.get("by_reason")),
+        "counters": counts(raw.get("counters"), MAX_STATS_ENTRIES),
+        "rejected_by_key": counts(rejected.get("by_key"), MAX_STATS_ENTRIES),
+        "rejected_by_reason": counts(rejected.get("by_reason"), MAX_STATS_ENTRIES),
         "dropped": dropped if type(dropped) is int and dropped >= 0 else 0,
         "links": _link_map(raw.get("links")),
     }

@@ -40,7 +40,7 @@ from tltrack.live.manifest import ENV as MANIFEST_ENV
 from tltrack.live.topology import Topology
 from tltrack.live.topology import free_port as free_port
 from tltrack.wire import keys
-from tltrack.wire.messages import decode_stats, json_object
+from tltrack.wire.messages import counts, decode_stats, json_object
 from tltrack.wire.transport import Publisher, Subscriber, ZenohSettings, open_session, query
 
 #: the signals that stop a command and every process it started
@@ -439,10 +439,9 @@ def _steps_reported(payload: bytes) -> int | None:
     """The steps a service's statistics count; None if they do not say (or are no statistics:
     without access control anyone may publish on the key)."""
     try:
-        steps = decode_stats(payload).get("counters", {}).get("steps")
-    except (ValueError, AttributeError):  # counters that are no object
+        return counts(decode_stats(payload).get("counters")).get("steps")
+    except ValueError:
         return None
-    return steps if type(steps) is int and steps >= 0 else None  # not True, not -1
 
 
 def wait_for_episode(stack: Stack, timeout: float, on_step: Callable[[int], None]) -> int | None:

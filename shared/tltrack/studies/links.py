@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from tltrack.engine import plots
+from tltrack.engine.montecarlo import FilterResult
 from tltrack.studies.common import Results, Runner, Setting, plain, row, run_difference, write
 
 LOSSES = [0.0, 0.1, 0.3, 0.5, 0.9]
@@ -80,7 +81,7 @@ def cell_names(Ts: float = 1.0) -> list[str]:
     return [*cells(Ts), *clock_cells(Ts)]
 
 
-def verdict(tl: Any, iso: Any) -> tuple[float, float, str]:
+def verdict(tl: FilterResult, iso: FilterResult) -> tuple[float, float, str]:
     """The paired mean difference TL - isolated, its standard error, and whether TL is worse
     (beyond :data:`SIGMAS` standard errors), better, or neither."""
     d = run_difference(tl, iso)

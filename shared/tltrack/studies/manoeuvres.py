@@ -16,13 +16,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from tltrack.config import Config
 from tltrack.config.target_classes import TARGET_CLASSES
 from tltrack.engine import plots
+from tltrack.engine.montecarlo import FilterResult
 from tltrack.studies.common import Results, Runner, Setting, paired, plain, row, write
 
 #: the longest truth, in seconds
@@ -74,7 +74,7 @@ def configs(
     }
 
 
-def diverged(r: Any) -> float:
+def diverged(r: FilterResult) -> float:
     """The share of runs whose overall RMSE passes :data:`DIVERGED_M`."""
     return float(np.mean(~(np.asarray(r.run_rmse) <= DIVERGED_M)))
 

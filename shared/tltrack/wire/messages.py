@@ -635,3 +635,16 @@ def decode_stats(payload: bytes) -> dict[str, Any]:
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise ValueError(f"{len(payload)} B > {MAX_PAYLOAD_BYTES} B")
     return json_object(payload)
+
+
+def counts(value: Any, limit: int = 256) -> dict[str, int]:
+    """The ``{str: whole number >= 0}`` entries of a statistics mapping (``counters``, the
+    rejections ``by_key``), at most ``limit``: anything else is left out (not ``True``, not -1)."""
+    out: dict[str, int] = {}
+    if isinstance(value, dict):
+        for key, n in value.items():
+            if len(out) >= limit:
+                break
+            if isinstance(key, str) and type(n) is int and n >= 0:
+                out[key[:256]] = n
+    return out
