@@ -25,6 +25,42 @@ def test_bad_values_are_refused_naming_the_field(field, value):
         make_config(**{field: value})
 
 
+@pytest.mark.parametrize(
+    ("changes", "why"),
+    [
+        # K derived from duration_s escaped K's bound: 1e12 steps asked for 36 TiB
+        (
+            {"duration_s": 1e12},
+            "duration_s = 1e\\+12 s holds K = 1000000000000 steps of the primary",
+        ),
+        ({"duration_s": 100_001.0}, "at most 100000"),
+        # the UKF's sqrt(n + kappa) raised from the first filter made, after validation
+        ({"kappa": -5.0}, "kappa = -5: n \\+ kappa must be positive \\(ct: n = 5\\)"),
+        # K periods of 1e200 s overflowed the timeline's int64 microseconds
+        ({"Ts": 1e200, "K": 3}, "Ts"),
+        ({"max_clock_offset_s": 1e300}, "max_clock_offset_s"),
+        ({"sources": [{"id": "s1", "period_s": 1e200}]}, "period_s"),
+    ],
+    ids=["duration-1e12", "duration-over", "kappa", "Ts", "clock-offset", "source-period"],
+)
+def test_values_that_validated_and_then_failed_are_refused(changes, why):
+    with pytest.raises(ConfigError, match=why):
+        make_config(**changes)
+    assert make_config(kappa=-4.5).kappa == -4.5  # n + kappa > 0: allowed
+
+
+def test_a_config_file_with_a_byte_order_mark_or_nested_too_deeply(tmp_path):
+    """An editor's BOM was "not valid TOML ... at line 1, column 1"; a JSON nested 100000 deep
+    raised RecursionError, a traceback."""
+    bom = tmp_path / "bom.toml"
+    bom.write_text('scenario = "cv"\n', encoding="utf-8-sig")
+    assert load_config(bom).scenario == "cv"
+    deep = tmp_path / "deep.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ConfigError, match=r"deep\.json: not valid JSON: nested too deeply"):
+        load_config(deep)
+
+
 def test_unknown_field_and_wrong_dimension_are_refused():
     with pytest.raises(ConfigError, match="partcles"):
         make_config({"partcles": 10})

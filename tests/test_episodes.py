@@ -146,3 +146,24 @@ def test_a_missing_step_is_given_up_on_only_after_the_gap_timeout() -> None:
     assert q.overdue(2.0, now=102.1) == [2, 3]
     assert q.ready() == "z4" and q.offer(3, "late") == "stale"
     assert q.overdue(2.0, now=200.0) == []  # nothing missing: no gap
+
+
+@pytest.mark.parametrize("role", ["primary", "source"])
+def test_a_tracker_refuses_an_episode_whose_filter_it_cannot_make(role: str) -> None:
+    """A filter that raises as it is made (a UKF with n + kappa <= 0, which the config now
+    refuses as well) ended the source tracker: the episode is refused and counted instead."""
+    from doubles import Offline
+    from tltrack.services.primary_tracker import tracker as primary_svc
+    from tltrack.services.source_tracker import tracker as source_svc
+    from tltrack.wire.messages import decode
+
+    svc = Offline(f"{role}_tracker")
+    made: primary_svc.PrimaryTracker | source_svc.SourceTracker
+    if role == "primary":
+        made = primary_svc.PrimaryTracker(primary_svc.Settings(filter="ukf"), svc)
+    else:
+        made = source_svc.SourceTracker(source_svc.Settings(filter="ukf"), svc)
+    start = decode(episode_start("ep-a", K), EpisodeStart)
+    cfg = start.parsed_config().model_copy(update={"kappa": -5.0})  # as no config validates
+    assert made._open(start, cfg) is None
+    assert svc.counters == {"episodes_refused": 1}

@@ -280,6 +280,24 @@ def test_a_transfer_describes_its_sensor_and_its_size_follows_the_kind() -> None
     assert reject(pack(d), Transfer) == "invalid"
 
 
+def test_a_transfer_names_every_parameter_of_its_sensor() -> None:
+    """The primary builds the source's sensor from the transfer: one left out crashed it."""
+    d = raw(VALID_TRANSFER)
+    del d["sensor"]["sigma_r"]
+    with pytest.raises(MessageRejected, match="needs sigma_r") as info:
+        decode(pack(d), Transfer)
+    assert info.value.reason == "invalid"
+
+
+@pytest.mark.parametrize(("i", "typ"), [(1, Truth), (4, EstimateMsg)])
+@pytest.mark.parametrize("field", ["x", "pos"])
+def test_a_state_beyond_1e9_is_refused(i: int, typ: type[Message], field: str) -> None:
+    """Finite, and its square overflowed the scorer's error (OverflowError ended it)."""
+    d = raw(samples()[i])
+    d[field] = [1e155, *d[field][1:]]
+    assert reject(pack(d), typ) == "out_of_range"
+
+
 def test_estimate_bad_shapes() -> None:
     est = samples()[4]
     d = raw(est)
@@ -417,6 +435,12 @@ def test_episode_start_with_bad_config() -> None:
     d = raw(samples()[6])
     d["config"]["no_such_field"] = 1
     assert reject(pack(d), EpisodeStart) == "invalid"
+    d = raw(samples()[6])  # K follows from it: 200000 steps, over the 100000 receivers take
+    d["config"] = {**d["config"], "duration_s": 200_000.0}
+    del d["config"]["K"]
+    with pytest.raises(MessageRejected, match="K") as info:
+        decode(pack(d), EpisodeStart)
+    assert info.value.reason == "invalid"
     for field, value in (("kappa", math.nan), ("primary_position", [math.inf, 0.0])):
         d = raw(samples()[6])
         d["config"][field] = value

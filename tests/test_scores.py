@@ -130,11 +130,11 @@ def test_the_database_comes_from_the_scorers_variable(
     assert r.exit_code == 0 and len(r.stdout.splitlines()) == 8
 
 
-def _a_damaged_row(tmp_path: Path, pos: str = "[1]") -> Path:
+def _a_damaged_row(tmp_path: Path, pos: str = "[1]", column: str = "pos") -> Path:
     p = tmp_path / "scorer.sqlite"
     scorer_file(p).close()
     with sqlite3.connect(p) as con:
-        con.execute("UPDATE estimates SET pos = ? WHERE k = 2 AND filter = 'rpf'", (pos,))
+        con.execute(f"UPDATE estimates SET {column} = ? WHERE k = 2 AND filter = 'rpf'", (pos,))
     return p
 
 
@@ -153,10 +153,13 @@ def _not_the_scorers(tmp_path: Path) -> Path:
         (lambda tmp: (tmp / "notes.txt").write_text("not sqlite" * 100) and tmp / "notes.txt",
          "not an SQLite database"),
         (_not_the_scorers, "not a scorer's database"),
-        (_a_damaged_row, "a position is two finite numbers, not '[1]'"),
-        (lambda tmp: _a_damaged_row(tmp, "[NaN, 1]"), "two finite numbers, not '[NaN, 1]'"),
+        (_a_damaged_row, "a position is two numbers within 1e9 m, not '[1]'"),
+        (lambda tmp: _a_damaged_row(tmp, "[NaN, 1]"), "within 1e9 m, not '[NaN, 1]'"),
+        # its square overflowed: OverflowError, a traceback
+        (lambda tmp: _a_damaged_row(tmp, "[1e155, 1]"), "within 1e9 m, not '[1e155, 1]'"),
+        (lambda tmp: _a_damaged_row(tmp, None, "t_recv"), "t_recv is None, not a time"),
     ],
-    ids=["missing", "directory", "text", "other-sqlite", "damaged-row", "nan"],
+    ids=["missing", "directory", "text", "other-sqlite", "damaged-row", "nan", "huge", "no-time"],
 )  # fmt: skip
 def test_bad_input_exits_2_with_the_reason(tmp_path: Path, make: Any, needle: str) -> None:
     db = make(tmp_path)
@@ -221,6 +224,12 @@ def test_an_episodes_estimates_as_tltrack_tracks_csv(tmp_path: Path) -> None:
     r = scores("--db", str(db), "--episode", "ep-a", "--estimates", str(out))
     said = " ".join(r.output.split())
     assert r.exit_code == 2 and "'ep-a': its config names no motion model (scenario)" in said
+    with sqlite3.connect(db) as con:  # a NULL state: json.loads(None), a TypeError's traceback
+        con.execute('UPDATE episodes SET config = \'{"scenario": "ct"}\'')
+        con.execute("UPDATE estimates SET x = NULL WHERE k = 2 AND filter = 'rpf'")
+    r = scores("--db", str(db), "--episode", "ep-a", "--estimates", str(out))
+    said = " ".join(r.output.split())
+    assert r.exit_code == 2 and "rpf's x at k = 2 is None, not JSON text" in said, said
 
 
 def test_jsonl_to_a_device_is_written_through(tmp_path: Path) -> None:

@@ -225,3 +225,37 @@ def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
     assert tracker.episodes.get("e").transfers == {}  # type: ignore[union-attr]
     offer(5.0 + 0.0005)
     assert set(tracker.episodes.get("e").transfers[5]) == {"s1"}  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(
+    ("period_s", "t0_s"),
+    [(1e-7, 0.0), (1e-4, 0.0), (2.0, 0.0), (1.0, -0.5), (1.0, 1.25), (1.0, 1e300)],
+    ids=["rounds-to-zero", "ten-thousand-a-step", "not-Ts", "before", "after", "far"],
+)
+def test_a_schedule_that_cannot_be_the_episodes_is_refused_and_counted(
+    period_s: float, t0_s: float
+) -> None:
+    """A period of 1e-7 s divided by zero in the source (its tracker ended), 1e-4 s made it
+    compute 10,000 transfers a step; any period but Ts, or a first sample no phase in [0, Ts)
+    and clock offset within max_clock_offset_s gives, is not the primary's: refused."""
+    from tltrack.services.source_tracker import tracker as source_svc
+    from tltrack.wire.messages import Schedule
+
+    svc = Offline("source_tracker", keys.source_operator("s1"))
+    tracker = source_svc.SourceTracker(source_svc.Settings.model_validate({}), svc)
+    cfg = make_config(
+        BASE,
+        max_clock_offset_s=0.25,
+        sources=[{"id": "s1", "period_s": 4.0, "clock_offset_s": 0.25}],
+    )
+    start = EpisodeStart(
+        episode="e", sender="sensor_sim", k=0, t_sensor=time.time(), run=0,
+        config=cfg.model_dump(mode="json"), K=cfg.K, steps_per_sec=0.0,
+    )  # fmt: skip
+    tracker.handle(received(keys.episode("e"), encode(start)))
+    for period, t0 in ((period_s, t0_s), (1.0, 0.0)):  # then the primary's own
+        msg = Schedule(episode="e", sender=keys.PRIMARY, k=0, t_sensor=time.time(),
+                       period_s=period, t0_s=t0)  # fmt: skip
+        tracker.handle(received(keys.schedule("e"), encode(msg)))
+    assert svc.rejects.by_reason() == {"invalid": 1}
+    assert tracker.episodes.get("e").tracker.addressed  # type: ignore[union-attr]

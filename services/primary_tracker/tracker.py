@@ -23,7 +23,6 @@ from pydantic import Field
 from pydantic_settings import SettingsConfigDict
 from tltrack.config import PRIMARY, Config, FilterKindName
 from tltrack.config.timeline import US
-from tltrack.filters.decision import NotComparableError
 from tltrack.filters.kinds import FILTERS
 from tltrack.filters.warm import warm_up
 from tltrack.live.episodes import StepQueue, TrackedEpisodes
@@ -163,7 +162,7 @@ class PrimaryTracker:
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         try:
             tracker = PrimaryEpisode(cfg, start.run, self.s.filter, self.s.robust)
-        except NotComparableError as err:
+        except ValueError as err:  # not comparable, or a filter its config cannot make
             log.error("episode %s refused: %s", start.episode, err)
             self.svc.count("episodes_refused")
             return None

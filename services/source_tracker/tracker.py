@@ -81,14 +81,23 @@ class SourceTracker:
         if ep is None:
             later = partial(self._on_schedule, e, key, schedule)
             self.episodes.hold(e, key, later, self.svc.rejects)
-        else:
+            return
+        try:
             ep.tracker.heard(schedule)
+        except ValueError as err:
+            log.warning("episode %s: schedule refused: %s", e, err)
+            self.svc.rejects.add(key, "invalid")
 
     def _open(self, start: EpisodeStart, cfg: Config) -> Episode | None:
         if self.s.source_id not in {src.id for src in cfg.sources}:
             log.info("episode %s has no source %s; ignored", start.episode, self.s.source_id)
             return None
-        tracker = SourceEpisode(cfg, start.run, self.s.filter, self.s.source_id)
+        try:
+            tracker = SourceEpisode(cfg, start.run, self.s.filter, self.s.source_id)
+        except ValueError as err:  # a filter its config cannot make (a UKF's n + kappa <= 0)
+            log.error("episode %s refused: %s", start.episode, err)
+            self.svc.count("episodes_refused")
+            return None
         log.info("episode %s (run %d): %s", start.episode, start.run, tracker.name)
         return Episode(start, tracker)
 

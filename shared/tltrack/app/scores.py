@@ -83,7 +83,7 @@ def _write_estimates(conn: sqlite3.Connection, db: Path, episode: str | None, pa
     except OSError as err:
         say_error(f"--estimates: cannot write {path}: {err.strerror}")
         raise typer.Exit(2) from None
-    except (sqlite3.DatabaseError, ValueError, KeyError) as err:
+    except (sqlite3.DatabaseError, ValueError, KeyError, TypeError) as err:  # a cell of no state
         say_error(f"--db: {db}: {err}")
         raise typer.Exit(2) from None
     console.print(f"wrote {len(rows)} estimates to {path}")

@@ -76,16 +76,17 @@ def read_mapping(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     toml = p.suffix.lower() == ".toml"
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # an editor's byte-order mark too
     except OSError as err:
         raise ConfigError(f"cannot read config file {p}: {err.strerror}") from None
     except UnicodeDecodeError as err:
         raise ConfigError(f"{p}: not UTF-8 text (byte {err.start}), so not a config") from None
     try:
         data = tomllib.loads(text) if toml else json.loads(text)
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as err:
+    except (tomllib.TOMLDecodeError, json.JSONDecodeError, RecursionError) as err:
         also = "" if toml or p.suffix.lower() == ".json" else " (a config is .toml, or else JSON)"
-        raise ConfigError(f"{p}: not valid {'TOML' if toml else 'JSON'}{also}: {err}") from None
+        why = "nested too deeply" if isinstance(err, RecursionError) else err
+        raise ConfigError(f"{p}: not valid {'TOML' if toml else 'JSON'}{also}: {why}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: the top level must be a table/object")
     return data

@@ -101,6 +101,11 @@ PRIMARY = "primary"
 #: the most false alarms a scan may be asked to draw on average: the clutter study's densest cell
 #: draws about 40,000; a rate of 1e9 asked for 15 GiB in a single run of 100 particles
 MAX_CLUTTER_RATE = 1_000_000
+#: the most steps a run may have (K, or duration_s / Ts)
+MAX_STEPS = 100_000
+#: the longest period, clock offset: 1e6 s (11.6 days); K of them stay well inside the int64
+#: microseconds of the timeline (:mod:`tltrack.config.timeline`), where 1e200 s overflowed
+LONGEST_S = 1e6
 
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 Latitude = Annotated[float, Field(ge=-90, le=90, allow_inf_nan=False)]
@@ -312,6 +317,7 @@ class SourceSpec(BaseModel):
     period_s: float | None = Field(
         None,
         gt=0,
+        le=LONGEST_S,
         allow_inf_nan=False,
         description="its sensor's sampling period; default: Ts",
         json_schema_extra=unit("s"),
@@ -356,12 +362,17 @@ class Config(BaseModel):
     scenario: str = Field("ct", description="the truth's and the filters' motion model")
     preset: Preset = "paper"
     Ts: float = Field(
-        1.0, gt=0, allow_inf_nan=False, description="sampling period", json_schema_extra=unit("s")
+        1.0,
+        gt=0,
+        le=LONGEST_S,
+        allow_inf_nan=False,
+        description="sampling period",
+        json_schema_extra=unit("s"),
     )
     K: Count = Field(
         100,
         ge=1,
-        le=100_000,
+        le=MAX_STEPS,
         description="the primary's steps per run (given duration_s: derived from it)",
         json_schema_extra=unit("1"),
     )
@@ -388,6 +399,7 @@ class Config(BaseModel):
     max_clock_offset_s: float = Field(
         0.0,
         ge=0,
+        le=LONGEST_S,
         allow_inf_nan=False,
         description="every operator's clock is within this of the truth; a transfer's time is "
         "as uncertain (0: the paper's shared clock)",
@@ -595,6 +607,10 @@ class Config(BaseModel):
                 raise ValueError(f"{name} must be finite")
         if any(v <= 0 for v in self.P0_diag):
             raise ValueError("P0_diag must be positive")
+        if n + self.kappa <= 0:  # the UKF's sigma points spread by sqrt(n + kappa)
+            raise ValueError(
+                f"kappa = {self.kappa:g}: n + kappa must be positive ({self.scenario}: n = {n})"
+            )
         if (self.truth == "file") != (self.truth_file is not None):
             raise ValueError("truth 'file' needs a truth_file, and a truth_file needs truth 'file'")
         ids = [s.id for s in self.sources]
@@ -636,6 +652,11 @@ class Config(BaseModel):
                 raise ValueError(f"duration_s = {self.duration_s:g} s holds no primary sample")
             if "K" in self.model_fields_set and self.K != K:
                 raise ValueError(f"give duration_s or K, not both: duration_s holds K = {K}")
+            if K > MAX_STEPS:
+                raise ValueError(
+                    f"duration_s = {self.duration_s:g} s holds K = {K} steps of the primary, "
+                    f"at most {MAX_STEPS}"
+                )
             object.__setattr__(self, "K", K)
         grid = self.timeline.grid_us  # refuses periods and phases with no common grid
         if self.truth == "file" and grid != us(self.Ts):

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from tltrack.live import latency
+from tltrack.models.components import MAX_MAGNITUDE
 
 if TYPE_CHECKING:  # the scorer imports this module: none of the engine at run time
     from tltrack.engine.track import Estimated
@@ -49,13 +50,28 @@ def squared_error(pos: Sequence[float], truth: Sequence[float]) -> float:
 
 def _position(text: str) -> list[float]:
     """A stored position, or ValueError: a damaged or foreign row must not end in a traceback."""
-    pos = json.loads(text)  # takes NaN and Infinity, which no message carries
+    pos = _json(text, "a position")  # takes NaN and Infinity, which no message carries
     numbers = isinstance(pos, list) and all(
-        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in pos
-    )
+        isinstance(v, int | float) and not isinstance(v, bool) and abs(v) <= MAX_MAGNITUDE
+        for v in pos
+    )  # NaN fails the bound; beyond it, no message carries one and its square may overflow
     if not (numbers and len(pos) == 2):
-        raise ValueError(f"a position is two finite numbers, not {text[:40]!r}")
+        raise ValueError(f"a position is two numbers within 1e9 m, not {text[:40]!r}")
     return pos
+
+
+def _json(text: object, what: str) -> Any:
+    """A stored JSON cell, or ValueError (a NULL, or text that is no JSON)."""
+    if not isinstance(text, str | bytes):
+        raise ValueError(f"{what} is {text!r}, not JSON text")
+    return json.loads(text)  # json.JSONDecodeError is a ValueError
+
+
+def _time(t: object, what: str) -> float:
+    """A stored time (s), or ValueError (a NULL, or no number)."""
+    if isinstance(t, bool) or not isinstance(t, int | float):
+        raise ValueError(f"{what} is {t!r}, not a time")
+    return float(t)
 
 
 @dataclass(frozen=True)
@@ -119,7 +135,8 @@ def step_scores(db: sqlite3.Connection, episode: str | None = None) -> Iterator[
         error = None
         if pos is not None and truth is not None:
             error = math.sqrt(squared_error(_position(pos), _position(truth)))
-        yield StepScore(ep, name, k, error, latency.end_to_end_ms(t_sensor, t_recv), bool(used))
+        delay = latency.end_to_end_ms(_time(t_sensor, "t_sensor"), _time(t_recv, "t_recv"))
+        yield StepScore(ep, name, k, error, delay, bool(used))
 
 
 def estimates(db: sqlite3.Connection, episode: str | None = None) -> tuple[str, list[Estimated]]:
@@ -144,7 +161,8 @@ def estimates(db: sqlite3.Connection, episode: str | None = None) -> tuple[str, 
     out: list[Estimated] = []
     query = "SELECT k, filter, x, P FROM estimates WHERE episode = ? ORDER BY k, filter"
     for k, name, x, P in db.execute(query, (episode,)):
-        mean, cov = np.asarray(json.loads(x), dtype=float), np.asarray(json.loads(P), dtype=float)
+        mean = np.asarray(_json(x, f"{name}'s x at k = {k}"), dtype=float)
+        cov = np.asarray(_json(P, f"{name}'s P at k = {k}"), dtype=float)
         if mean.shape != (n_x,) or cov.shape != (n_x, n_x):
             raise ValueError(
                 f"{name} at k = {k}: a state of shape {mean.shape} and a covariance of "

@@ -189,8 +189,14 @@ class SourceEpisode(_Operator):
         return self._estimates.pop(self.name), eta
 
     def heard(self, schedule: Schedule) -> None:
-        """The primary's published schedule: where its samples are on its clock."""
-        ours = self.timeline
+        """The primary's published schedule: where its samples are on its clock. ValueError if
+        it cannot be the episode's: a period other than Ts, or a first sample that no phase in
+        [0, Ts) and clock offset within max_clock_offset_s gives."""
+        ours, cfg = self.timeline, self.cfg
+        if round(schedule.period_s * US) != ours.clocks[PRIMARY].period_us:
+            raise ValueError(f"period_s = {schedule.period_s:g} s, not the episode's Ts")
+        if not -cfg.max_clock_offset_s <= schedule.t0_s < cfg.Ts + cfg.max_clock_offset_s:
+            raise ValueError(f"t0_s = {schedule.t0_s:g} s: no phase and clock offset give it")
         primary = Clock(round(schedule.period_s * US), 0, round(schedule.t0_s * US))
         self._view = dataclasses.replace(ours, clocks={**ours.clocks, PRIMARY: primary})
 

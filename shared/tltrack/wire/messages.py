@@ -126,6 +126,15 @@ def _check_vector(v: list[float], sizes: tuple[int, ...], name: str) -> list[flo
     return v
 
 
+def _check_position(v: list[float], sizes: tuple[int, ...], name: str) -> list[float]:
+    """A state or position: of one of ``sizes``, each entry within 1e9 (a metre, a metre per
+    second: a farther one is no target's, and its square would overflow a float)."""
+    _check_vector(v, sizes, name)
+    if any(abs(c) > components.MAX_MAGNITUDE for c in v):
+        raise PydanticCustomError("out_of_range", f"{name} has an entry beyond 1e9")
+    return v
+
+
 def _check_scan(v: list[list[float]], sizes: tuple[int, ...], name: str) -> list[list[float]]:
     """At most MAX_DETECTIONS detections, each of one of ``sizes``."""
     if len(v) > MAX_DETECTIONS:
@@ -267,12 +276,12 @@ class Truth(Message):
     @field_validator("x")
     @classmethod
     def _shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, state_sizes(), "x")
+        return _check_position(v, state_sizes(), "x")
 
     @field_validator("pos")
     @classmethod
     def _pos_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (2,), "pos")
+        return _check_position(v, (2,), "pos")
 
     @field_validator("scan")
     @classmethod
@@ -316,6 +325,11 @@ class Transfer(Message):
                 "invalid",
                 f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1}), or give t_apply",
             )
+        missing = [p.name for p in self.sensor.declared if p.name not in self.sensor.params]
+        if missing:  # the primary builds the source's sensor from it: every parameter, filled in
+            raise PydanticCustomError(
+                "invalid", f"sensor: a {self.sensor.kind} sensor needs {', '.join(missing)}"
+            )
         n_z = self.sensor.n_z
         _check_vector(self.eta, (n_z,), "eta")
         bad = components.first_problem(SENSORS.get(self.sensor.kind).components, self.eta)
@@ -351,12 +365,12 @@ class EstimateMsg(Message):
     @field_validator("x")
     @classmethod
     def _x_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, state_sizes(), "x")
+        return _check_position(v, state_sizes(), "x")
 
     @field_validator("pos")
     @classmethod
     def _pos_shape(cls, v: list[float]) -> list[float]:
-        return _check_vector(v, (2,), "pos")
+        return _check_position(v, (2,), "pos")
 
     @model_validator(mode="after")
     def _P_ok(self) -> EstimateMsg:
@@ -391,12 +405,15 @@ class EpisodeStart(Message):
             raise PydanticCustomError("non_finite", "config holds a NaN or infinity")
         try:  # untrusted: a kind it names must be registered here; nothing is imported
             cfg = Config.model_validate(v, context={"trusted": False})
+            canonical = cfg.model_dump(mode="json")
+            # what receivers parse: its derived fields (K from duration_s) must pass too
+            Config.model_validate(canonical, context={"trusted": False})
         except ValidationError as err:
             unknown = any(e["type"] == "unknown_kind" for e in err.errors())
             detail = {"detail": describe_validation_error(err)}
             reason = "unknown_kind" if unknown else "invalid"
             raise PydanticCustomError(reason, "config: {detail}", detail) from None
-        return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
+        return canonical  # presets filled in, tuples as lists
 
     def parsed_config(self) -> Any:
         """The validated :class:`tltrack.config.Config`."""
