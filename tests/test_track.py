@@ -156,6 +156,26 @@ def test_a_bad_row_refuses_the_file_naming_its_line(recorded, tmp_path, row, say
     assert says.replace(" ", "") in "".join(done.output.split()), done.output  # wrapped anywhere
 
 
+@pytest.mark.parametrize(
+    ("row", "says"),
+    [
+        # K follows from the file: 1e9 steps of empty scans hung the replay's start
+        ("1000000000,primary,1000,0.5,0", ":2: k = 1000000000 is beyond the 100000 steps of a run"),
+        # csv's own limit on a field: its csv.Error was a traceback
+        ("1,primary," + "1" * 200_000 + ",0.5,0", ":2: not CSV: field larger than field limit"),
+    ],
+    ids=["k-1e9", "huge-field"],
+)
+def test_a_file_whose_last_step_is_its_K_is_refused_past_a_runs_steps(
+    recorded, tmp_path, row, says
+) -> None:
+    cfg, _run, _path = recorded
+    p = tmp_path / "bad.csv"
+    p.write_text(",".join(HEADER) + "\n" + row + "\n")
+    with pytest.raises(ScanFileError, match=re.escape(says)):
+        read_scans(p, sensors(cfg))
+
+
 def test_a_sensor_the_config_says_is_clean_takes_one_detection_per_step(recorded, tmp_path) -> None:
     _cfg, _run, path = recorded
     clean = make_config(preset="arasaratnam-haykin", K=25)

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from tltrack.config.schema import MAX_STEPS
 from tltrack.models import components
 from tltrack.models.base import MeasurementModel
 from tltrack.models.scan import MAX_DETECTIONS
@@ -115,6 +116,8 @@ def read_scans(
         raise ScanFileError(f"cannot read {path}: {err.strerror}") from None
     except UnicodeDecodeError:
         raise ScanFileError(f"{path}: not a UTF-8 text file") from None
+    except csv.Error as err:  # a field over csv's 128 kB, a NUL byte
+        raise ScanFileError(f"{path}:{reader.line_num + 1}: not CSV: {err}") from None
     if not rows:
         raise ScanFileError(f"{path}: no detections")
     K = max(k for _, k in rows) if K is None else K
@@ -153,6 +156,8 @@ def _key(
         raise ScanFileError(f"{path}:{line}: need k >= 1, not {k}")
     if k > K:
         raise ScanFileError(f"{path}:{line}: k = {k} is beyond the config's K = {K:.0f}")
+    if k > MAX_STEPS:  # a step no run has: K empty scans before it, 1e9 of them a hang
+        raise ScanFileError(f"{path}:{line}: k = {k} is beyond the {MAX_STEPS} steps of a run")
     if row["sensor"] not in sensors:
         known = list(sensors)
         raise ScanFileError(f"{path}:{line}: unknown sensor {row['sensor']!r} (known: {known})")
