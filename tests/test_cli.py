@@ -351,6 +351,11 @@ def small_results(tmp_path_factory) -> dict:
         (lambda d: d.update(pcrlb={"x": 5}), "pcrlb: not a map"),
         (lambda d: d.update(pcrlb={"x": ["abc"]}), "pcrlb: not a map"),
         (lambda d: d["config"].update(K=-3), "config: K: Input should be greater than"),
+        # run 0 is traced again from the truth file: one since moved was a traceback
+        (
+            lambda d: d["config"].update(truth="file", truth_file="/moved/track.csv"),
+            "cannot redraw",
+        ),
     ],
 )
 def test_plot_refuses_what_its_figures_cannot_draw(tmp_path, small_results, spoil, says):
@@ -365,6 +370,21 @@ def test_plot_refuses_what_its_figures_cannot_draw(tmp_path, small_results, spoi
     r = runner.invoke(app, ["plot", str(path)])
     assert r.exit_code == 2 and says in " ".join(r.output.split()), r.output
     assert "errors.pydantic.dev" not in r.output and not list(tmp_path.glob("*.png"))
+
+
+@pytest.mark.parametrize(
+    ("command", "writes"),
+    [
+        (["experiment", "--filters", "ukf", "--runs", "2"], "results.json"),
+        (["study", "clutter", "--runs", "2"], "clutter.json"),
+    ],
+)
+def test_a_file_the_run_writes_that_is_a_folder_is_refused_before_it(tmp_path, command, writes):
+    """The run went to its end, then lost its results to an IsADirectoryError's traceback."""
+    (tmp_path / writes).mkdir()
+    r = runner.invoke(app, [*command, "--out", str(tmp_path)])
+    said = " ".join(r.output.split())
+    assert r.exit_code == 2 and f"{writes} is a folder, where it writes a file" in said, said
 
 
 def test_plot_draws_a_series_with_a_gap(tmp_path, small_results):

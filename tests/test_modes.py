@@ -167,6 +167,16 @@ def test_the_manoeuvre_study_writes_one_model_against_the_modes_on_every_truth(
     assert (tmp_path / "manoeuvres.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match="no such track"):
         manoeuvres(Setting(runs=1), Runner(workers=1), tmp_path, tracks=tmp_path)
+    partial = tmp_path / "partial"  # the last truth's track missing: refused before any run
+    partial.mkdir()
+    for truth in TRUTHS[:-1]:
+        (partial / truth.file).parent.mkdir(parents=True, exist_ok=True)
+        (partial / truth.file).write_bytes((tracks / truth.file).read_bytes())
+    ran: list[object] = []
+    runner = Runner(workers=1, progress=lambda n: ran.append(n))
+    with pytest.raises(ValueError, match=f"{TRUTHS[-1].file}: no such track"):
+        manoeuvres(Setting(runs=1, particles=200), runner, tmp_path, tracks=partial, longest_s=20)
+    assert ran == []  # it ran the first four truths (hours at 1000 runs), then lost them
 
 
 def test_gather_is_take_along_axis_on_the_ancestors_slots() -> None:

@@ -4,7 +4,7 @@ and the configuration built from a file and the options."""
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor
 from contextlib import contextmanager
 from datetime import timedelta
@@ -173,9 +173,12 @@ CheckpointDir = Annotated[
 ]
 
 
-def checked_folder(folder: Path, option: str = "--out", given: Path | None = None) -> Path:
+def checked_folder(
+    folder: Path, option: str = "--out", given: Path | None = None, writes: Sequence[str] = ()
+) -> Path:
     """An output folder, made and tried with a file at once, or refused (exit 2) naming the path
-    ``given``: a run of hours must not end in a traceback that loses its results."""
+    ``given``, or the file of ``writes`` that is a folder there: a run of hours must not end in a
+    traceback that loses its results."""
     from tltrack.engine.checkpoint import writable
 
     try:
@@ -185,6 +188,10 @@ def checked_folder(folder: Path, option: str = "--out", given: Path | None = Non
         where = f" ({err.filename})" if err.filename and err.filename != str(shown) else ""
         say_error(f"{option} {shown}: {err.strerror or err}{where}")
         raise typer.Exit(2) from None
+    for name in writes:
+        if (folder / name).is_dir():
+            say_error(f"{option} {folder}: {folder / name} is a folder, where it writes a file")
+            raise typer.Exit(2)
     return folder
 
 

@@ -153,7 +153,7 @@ def experiment(
     )
     names = filter_names(filters, cfg)
     checkpoint = checked_checkpoint(checkpoint)
-    checked_folder(out)
+    checked_folder(out, writes=("results.json", "rmse.png", "trajectory.png"))
     with engine_pool(scheduler, workers) as executor, progress_bar(cfg.runs, "runs") as bar:
         task = bar.add_task("runs", total=cfg.runs)
         doc = run_and_save(
@@ -226,5 +226,11 @@ def plot(
     except (OSError, ValueError) as err:
         say_error(f"cannot read {results_json}: {err}")
         raise typer.Exit(2) from None
-    for p in draw(doc, checked_folder(out or results_json.parent), cfg):
+    folder = checked_folder(out or results_json.parent, writes=("rmse.png", "trajectory.png"))
+    try:  # it traces run 0 again: a truth file since moved, a filter its sensors cannot run
+        wrote = draw(doc, folder, cfg)
+    except ValueError as err:
+        say_error(f"cannot redraw {results_json}: {err}")
+        raise typer.Exit(2) from None
+    for p in wrote:
         console.print(f"wrote {p}")

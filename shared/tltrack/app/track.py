@@ -95,7 +95,8 @@ def track(
     except (ScanFileError, ScansDoNotFitError) as err:
         say_error(str(err))
         raise typer.Exit(2) from None
-    checked_folder(out)  # before the run: a folder that cannot be written loses nothing
+    # before the run: a folder that cannot be written loses nothing
+    checked_folder(out, writes=("estimates.csv", "transfers.csv", "scans.png", "results.json"))
     for reason in recorded.refused:
         say_warning(f"{reason}: the filters predict through it", "refused")
     truth = file_truth(cfg) if cfg.truth == "file" else None
