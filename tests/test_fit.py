@@ -79,6 +79,24 @@ def test_a_fit_of_modes_writes_their_chain_at_the_filters_period(tmp_path: Path)
         cfg.mode_transition, transition(uniform_rates(3, 0.02), 2.0), atol=1e-6
     )
     assert cfg.Ts == 2.0
+    (tmp_path / "third.toml").write_text(config_text(done, Ts=1 / 3))  # {Ts:g} wrote 0.333333
+    assert load_config(tmp_path / "third.toml").Ts == 1 / 3
+
+
+@pytest.mark.parametrize(
+    ("ts", "says"),
+    [
+        ("0.0005", "share no grid of 1 ms"),
+        ("nan", "finite"),
+        ("inf", "finite"),
+        ("0", "greater than 0"),
+        ("-1", "greater than 0"),
+    ],
+)
+def test_a_period_no_config_takes_is_refused_before_the_fit(ts: str, says: str) -> None:
+    """0.5 ms passed, and the config written was refused when loaded; the others never did."""
+    done = CliRunner().invoke(app, ["fit", "--truth-file", "absent.csv", "--ts", ts])
+    assert done.exit_code == 2 and says in " ".join(done.output.split()), done.output
 
 
 def test_the_cli_warns_when_the_grid_cuts_the_fit_off(tmp_path: Path) -> None:

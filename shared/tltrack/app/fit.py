@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, cast
@@ -41,15 +40,18 @@ def fit(
     print each parameter with its 95% interval, and write a config that uses them."""
     from rich.table import Table
 
+    from tltrack.config import ConfigError, make_config
     from tltrack.config.truth_file import TruthFileError, read_track, to_local
     from tltrack.engine import fit as fitting
 
     if model not in fitting.PARAMETERS:
         say_error(f"--model: use {', '.join(fitting.PARAMETERS)}")
         raise typer.Exit(2)
-    if not (math.isfinite(Ts) and Ts > 0):
-        say_error(f"--ts must be a finite period > 0 s, not {Ts}")
-        raise typer.Exit(2)
+    try:  # the config it writes must load: Config's own rules for a period
+        make_config(scenario="ct", Ts=Ts)
+    except ConfigError as err:
+        say_error(f"--ts: {err}")
+        raise typer.Exit(2) from None
     if out is not None:
         checked_file(out)
     tracks = []
@@ -146,7 +148,7 @@ def config_text(result: Fit, Ts: float) -> str:
     specs = mode_specs(cast("Kind", result.kind), v)  # one of PARAMETERS, checked at the start
     Pi = transition(uniform_rates(len(specs), v["switch_rate"]), Ts)
     rows = ", ".join("[" + ", ".join(f"{p:.12g}" for p in row) + "]" for row in Pi)
-    text = head + f'scenario = "ct"\nTs = {Ts:g}\nmode_transition = [{rows}]\n'
+    text = head + f'scenario = "ct"\nTs = {Ts!r}\nmode_transition = [{rows}]\n'
     for m in specs:
         text += f'\n[[motion_modes]]\nkind = "{m["kind"]}"\nq1 = {m["q1"]:.6g}\n'
         text += f"q2 = {m['q2']:.6g}\n" if "q2" in m else ""

@@ -28,7 +28,10 @@ from tltrack.config import ConfigError
     "    tltrack reproduce --runs 200 --preset arasaratnam-haykin --truth noise-free"
 )
 def reproduce(
-    runs: Annotated[int, typer.Option(help="Monte-Carlo runs per point (paper: 10000)")] = 500,
+    runs: Annotated[
+        int,
+        typer.Option(min=2, help="Monte-Carlo runs per point (paper: 10000); 2 for an error bar"),
+    ] = 500,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/reproduce"),
     preset: Annotated[str, typer.Option(help="paper or arasaratnam-haykin")] = "paper",
     truth: Annotated[str, typer.Option(help="fixed, random or noise-free")] = "fixed",

@@ -47,7 +47,9 @@ def study(
             "manoeuvres, clutter or links"
         ),
     ],
-    runs: Annotated[int, typer.Option(help="Monte-Carlo runs per configuration")] = 200,
+    runs: Annotated[
+        int, typer.Option(min=2, help="Monte-Carlo runs per configuration; 2 for an error bar")
+    ] = 200,
     out: Annotated[Path, typer.Option(help="output directory")] = Path("out/studies"),
     seed: Annotated[int, typer.Option(help="master seed (the robust design was tuned on 1)")] = 0,
     kind: Annotated[str, typer.Option(help="the filter kind studied (pf, ukf, ...)")] = "pf",
