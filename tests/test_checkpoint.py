@@ -282,10 +282,21 @@ def test_a_sweep_finished_on_another_machine_is_read_back_with_a_warning(tmp_pat
     assert len(batches_run) == 2
 
 
-def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run):
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda d: d["results"][0]["pf"]["run_rmse"].pop(),  # a run short
+        # each was a traceback, or a result no study could read
+        lambda d: d["results"].__setitem__(0, [1]),
+        lambda d: d["results"][0]["pf"].__setitem__("run_rmse", "abcd"),
+        lambda d: d["results"][0]["pf"].__setitem__("rmse_overall", None),
+    ],
+    ids=["a-run-short", "a-list", "a-string", "a-null"],
+)
+def test_a_damaged_sweep_file_is_run_again_with_a_warning(tmp_path, batches_run, damage):
     whole, kept = _sweep_file_alone(tmp_path)
     doc = json.loads(kept.read_text())
-    doc["results"][0]["pf"]["run_rmse"].pop()  # a run short
+    damage(doc)
     kept.write_text(json.dumps(doc))
     batches_run.clear()
     with pytest.warns(UserWarning, match="running its sweep again"):
@@ -422,13 +433,21 @@ def test_of_one_prefix_per_machine_the_longest_is_read(tmp_path, batches_run):
     assert batches_run == [[6, 7, 8], [9]]
 
 
-@pytest.mark.parametrize("damage", ["cut short", "a run short"])
+@pytest.mark.parametrize(
+    "damage", ["cut short", "a run short", "nested too deeply", "no environment"]
+)  # the last two were a RecursionError's and a KeyError's traceback
 def test_a_damaged_prefix_file_is_ignored_with_a_warning(tmp_path, batches_run, damage):
     cfgs = _cfgs()
     whole = _sweep(cfgs)
     file = _prefix_alone(tmp_path, cfgs)
     if damage == "cut short":
         file.write_bytes(file.read_bytes()[:100])
+    elif damage == "nested too deeply":
+        file.write_text("[" * 100_000 + "]" * 100_000)
+    elif damage == "no environment":
+        doc = json.loads(file.read_text())
+        del doc["made"]["environment"]
+        file.write_text(json.dumps(doc))
     else:
         doc = json.loads(file.read_text())
         doc["stats"][0]["pf"]["run_mse"][0].pop()

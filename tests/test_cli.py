@@ -296,6 +296,7 @@ def test_a_task_that_waits_for_others_is_timed_from_its_own_start(monkeypatch):
         ("[1]", "unsupported results schema None"),
         ('{"schema_version": 0}', "unsupported results schema 0"),
         ("{", "cannot read"),
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply"),  # RecursionError: a traceback
     ],
 )
 def test_plot_refuses_a_file_that_is_not_a_results_json(tmp_path, text, says):

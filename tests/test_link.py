@@ -104,6 +104,28 @@ def test_a_stall_holds_the_bytes_and_the_rate_spaces_them():
         far.close()
 
 
+def test_a_rate_set_back_up_frees_the_link_at_once():
+    """A chunk sent at 1 bit/s held the link for its bits' time at that rate (8 kB: over two
+    hours), whatever the rate became after it; now they are timed at the rate in force."""
+    with target() as (server, to), LinkEmulator(to) as link:
+        client = dial(link)
+        far, _ = server.accept()
+        link.shape(rate_bps=1.0)
+        client.sendall(b"x" * 1000)
+        assert len(receive(far, 1000)) == 1000  # the first chunk goes at once
+        client.sendall(b"y" * 1000)
+        far.settimeout(0.3)
+        with pytest.raises(TimeoutError):
+            far.recv(1000)  # waits for the first one's 8000 bits
+        link.shape(rate_bps=None)
+        far.settimeout(5)
+        t0 = time.monotonic()
+        assert receive(far, 1000) == b"y" * 1000
+        assert time.monotonic() - t0 < 1.0
+        client.close()
+        far.close()
+
+
 def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
     path = tmp_path / "link.json"
     with target() as (_server, to), LinkEmulator(to) as link:
@@ -130,6 +152,9 @@ def test_the_control_file_sets_the_link_and_names_what_is_wrong(tmp_path):
         path.write_text(json.dumps(bad))
         with pytest.raises(ValueError, match=named):
             read_control(path)
+    path.write_text("[" * 100_000 + "]" * 100_000)  # RecursionError ended the emulator's loop
+    with pytest.raises(ValueError, match="nested too deeply"):
+        read_control(path)
     path.write_text('{"jitter_ms": ' + "9" * 400 + "}")  # overflows a float: still a ValueError
     with pytest.raises(ValueError, match="jitter_ms must be in"):
         read_control(path)

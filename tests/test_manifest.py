@@ -48,6 +48,9 @@ def test_a_bad_manifest_is_refused_naming_the_file_and_the_field(tmp_path: Path)
     bad.write_bytes(b"\xff\xfe\x00bad")  # was a UnicodeDecodeError's traceback
     with pytest.raises(ManifestError, match=r"ops\.toml: not UTF-8 text"):
         load_manifest(bad)
+    bad.write_text("x = " + "[" * 100_000 + "]" * 100_000)  # was a RecursionError's traceback
+    with pytest.raises(ManifestError, match=r"ops\.toml: not valid TOML: nested too deeply"):
+        load_manifest(bad)
     for one, other in (("s1", "S1"), ("s-1", "s_1")):  # one password variable, one host name
         bad.write_text(f'[[sources]]\nid = "{one}"\n[[sources]]\nid = "{other}"\n')
         with pytest.raises(ManifestError, match="differ only in case or in - against _"):

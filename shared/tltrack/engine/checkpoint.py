@@ -204,7 +204,7 @@ def _same_sweep(
         try:
             doc = json.loads(other.read_text(encoding="utf-8"))
             made = doc["made"]
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError, RecursionError):
             continue  # not this sweep's, or warned of when its own sweep reads it
         if isinstance(made, dict) and made.get("key") == key:
             found.append((other, doc))
@@ -343,7 +343,7 @@ class Checkpoint:
         if own.exists():
             try:
                 candidates.append((own, json.loads(own.read_text(encoding="utf-8"))))
-            except (OSError, ValueError) as err:
+            except (OSError, ValueError, RecursionError) as err:
                 self._unreadable(own, err)
         candidates += _same_sweep(self.folder, f"prefix-*-b{bs}.json", key, besides=own)
         usable: list[tuple[int, Path, Any]] = []  # (batches, file, document)
@@ -356,6 +356,8 @@ class Checkpoint:
                 done = doc["batches"]
                 if not isinstance(done, int) or done < 1:
                     raise ValueError(f"{done!r} batches")
+                if not isinstance(doc["made"].get("environment"), dict):
+                    raise ValueError("no environment it was made in")
             except (ValueError, KeyError, TypeError) as err:
                 self._unreadable(path, err)
                 continue

@@ -115,7 +115,10 @@ def write(doc: dict[str, Any], out_dir: Path) -> Path:
 def read(path: Path) -> dict[str, Any]:
     """A results document, refused (``ValueError``) unless it has what its figures are drawn from:
     the config, and each filter's RMSE per step and overall."""
-    doc = json.loads(Path(path).read_text())
+    try:
+        doc = json.loads(Path(path).read_text())
+    except RecursionError:
+        raise ValueError(f"{path}: nested too deeply") from None
     if not isinstance(doc, dict) or doc.get("schema_version") != SCHEMA_VERSION:
         version = doc.get("schema_version") if isinstance(doc, dict) else None
         raise ValueError(f"{path}: unsupported results schema {version!r}")

@@ -162,7 +162,9 @@ class LinkEmulator:
 
     def _write(self, conn: _Connection, b: socket.socket, held: queue.Queue[Any], d: Way) -> None:
         """Send each chunk to ``b`` once due, not stalled, and within the rate."""
-        free = 0.0  # when the previous chunk's last bit has gone at the rate
+        #: when the previous chunk began to go, and its bits: it has gone at the rate *now*, so
+        #: a rate set back up frees the link at once (a free time at the old rate held it)
+        last: tuple[float, int] | None = None
         with contextlib.suppress(OSError):
             while (item := held.get()) is not None:
                 due, data = item
@@ -170,13 +172,18 @@ class LinkEmulator:
                     with self._lock:
                         s = self._shapes[d]
                     now = time.monotonic()
+                    free = (
+                        0.0
+                        if last is None or s.rate_bps is None
+                        else last[0] + last[1] / s.rate_bps
+                    )
                     if not s.stalled and now >= max(due, free):
                         break
                     time.sleep(_TICK if s.stalled else min(_TICK, max(due, free) - now))
                 if conn.closed.is_set():
                     return
                 if s.rate_bps is not None:
-                    free = max(free, time.monotonic()) + len(data) * 8 / s.rate_bps
+                    last = (max(free, time.monotonic()), len(data) * 8)
                 b.sendall(data)
         conn.close()
         with self._lock, contextlib.suppress(ValueError):
@@ -249,8 +256,9 @@ def read_control(path: Path) -> dict[str, Any]:
     ``rate_kbps`` (null: no cap), ``stalled`` and ``cut``; ``ValueError`` names what is wrong."""
     try:
         raw = json.loads(path.read_text())
-    except (OSError, ValueError) as err:
-        raise ValueError(f"{path}: {err}") from None
+    except (OSError, ValueError, RecursionError) as err:
+        why = "nested too deeply" if isinstance(err, RecursionError) else err
+        raise ValueError(f"{path}: {why}") from None
     if not isinstance(raw, dict):
         raise ValueError(f"{path}: a JSON object, please")
     allowed = {"delay_ms", "jitter_ms", "rate_kbps", "stalled", "cut"}

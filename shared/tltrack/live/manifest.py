@@ -154,6 +154,8 @@ def load_manifest(path: str | Path | None = None) -> Manifest:
         raise ManifestError(f"{where}: not UTF-8 text (a manifest is TOML)") from None
     except tomllib.TOMLDecodeError as err:
         raise ManifestError(f"{where}: not valid TOML: {err}") from None
+    except RecursionError:
+        raise ManifestError(f"{where}: not valid TOML: nested too deeply") from None
     try:
         return Manifest.model_validate(data)
     except ValidationError as err:

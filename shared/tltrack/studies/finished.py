@@ -37,11 +37,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pydantic import TypeAdapter
+
 from tltrack.config import Config
 from tltrack.engine.checkpoint import Checkpoint, environment, made_elsewhere, write_whole
 from tltrack.engine.montecarlo import FilterResult
 
 Results = dict[str, FilterResult]
+#: a filter's results from a file: each field of its type (ValidationError, a ValueError)
+_RESULT = TypeAdapter(FilterResult)
 FORMAT = 1  #: the files' layout; another is run again
 
 
@@ -80,14 +84,15 @@ class Finished:
             if doc["format"] != FORMAT or len(doc["results"]) != len(self.cfgs):
                 raise ValueError(f"format {doc['format']}, {len(doc['results'])} configurations")
             out = [
-                {name: FilterResult(**fields) for name, fields in part.items()}
+                {name: _RESULT.validate_python(fields) for name, fields in part.items()}
                 for part in doc["results"]
             ]
             runs = {len(r.run_rmse) for part in out for r in part.values()}
             if runs != {self.cfgs[0].runs}:
                 raise ValueError(f"{sorted(runs)} runs, not {self.cfgs[0].runs}")
-        except (OSError, ValueError, KeyError, TypeError) as err:
-            warnings.warn(f"{file}: unreadable ({err}); running its sweep again", stacklevel=3)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
+            why = "nested too deeply" if isinstance(err, RecursionError) else err
+            warnings.warn(f"{file}: unreadable ({why}); running its sweep again", stacklevel=3)
             return None
         return out
 
