@@ -433,6 +433,21 @@ def test_of_one_prefix_per_machine_the_longest_is_read(tmp_path, batches_run):
     assert batches_run == [[6, 7, 8], [9]]
 
 
+def test_the_prefix_holds_every_full_batch_when_the_short_one_finished_first(tmp_path):
+    """The last full batch and a short last batch that finished before it were merged at once,
+    and the prefix, which holds full batches only, was not written: the 200-run clutter sweeps
+    kept 14 of their 15 full batches (182 runs, not 195) for the 1000-run ones."""
+    cfgs = _cfgs(runs=10)  # batches of 3, 3, 3 and 1
+    _sweep(cfgs, tmp_path)
+    _drop(tmp_path, "prefix-*.json")
+    short = Checkpoint(tmp_path, cfgs, NAMES).path([9]).name
+    for file in tmp_path.glob("batch-*.pkl"):
+        if file.name != short:
+            file.unlink()  # the short batch alone is read back: it is done before the others
+    _sweep(cfgs, tmp_path)
+    assert _prefix(tmp_path)[1]["batches"] == 3
+
+
 @pytest.mark.parametrize(
     "damage", ["cut short", "a run short", "nested too deeply", "no environment"]
 )  # the last two were a RecursionError's and a KeyError's traceback

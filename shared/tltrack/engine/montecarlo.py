@@ -565,6 +565,13 @@ def run_sweep(
         if progress:
             progress(sum(len(b) for b in batches[:merged]))
 
+    full = sum(len(b) == len(batches[0]) for b in batches)  #: batches before a short last one
+
+    def save_prefix() -> None:
+        if kept:  # the totals serialised now: no copy outlives a merge
+            plain = [{name: s.to_json() for name, s in total.items()} for total in totals]
+            kept.save_prefix(batches, merged, plain)
+
     def finished(i: int, stats: list[dict[str, FilterStats]], *, new: bool = True) -> None:
         nonlocal merged
         if kept and new:
@@ -576,9 +583,10 @@ def run_sweep(
         while merged in done:  # in batch order: float sums in a fixed order
             absorb(done.pop(merged))
             merged += 1
-        if kept and merged > before:  # the totals serialised now: no copy outlives a merge
-            plain = [{name: s.to_json() for name, s in total.items()} for total in totals]
-            kept.save_prefix(batches, merged, plain)
+            if merged == full:  # before a short last batch joins: a longer sweep goes on from it
+                save_prefix()
+        if before < merged < full:
+            save_prefix()
 
     todo = []  # the batches not read back from the checkpoint
     for i, b in enumerate(batches):
