@@ -40,8 +40,10 @@ def test_bad_values_are_refused_naming_the_field(field, value):
         ({"Ts": 1e200, "K": 3}, "Ts"),
         ({"max_clock_offset_s": 1e300}, "max_clock_offset_s"),
         ({"sources": [{"id": "s1", "period_s": 1e200}]}, "period_s"),
+        # a state per 1 ms tick of 1e5 s: 1e8 of them, 4 GB of truth
+        ({"K": 100_000, "primary_phase_s": 0.001}, "100000001 of its steps in the episode"),
     ],
-    ids=["duration-1e12", "duration-over", "kappa", "Ts", "clock-offset", "source-period"],
+    ids=["duration-1e12", "duration-over", "kappa", "Ts", "clock-offset", "source-period", "ticks"],
 )
 def test_values_that_validated_and_then_failed_are_refused(changes, why):
     with pytest.raises(ConfigError, match=why):

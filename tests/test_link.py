@@ -104,6 +104,24 @@ def test_a_stall_holds_the_bytes_and_the_rate_spaces_them():
         far.close()
 
 
+def test_a_rate_set_down_holds_only_the_chunks_after_it():
+    """A chunk that went at 8 Mbit/s is not timed again at the 1 kbit/s set after it."""
+    with target() as (server, to), LinkEmulator(to) as link:
+        client = dial(link)
+        far, _ = server.accept()
+        link.shape(rate_bps=8e6)
+        client.sendall(b"x" * 1000)
+        assert len(receive(far, 1000)) == 1000
+        time.sleep(0.3)
+        link.shape(rate_bps=1000.0)
+        t0 = time.monotonic()
+        client.sendall(b"y" * 10)
+        assert receive(far, 10) == b"y" * 10
+        assert time.monotonic() - t0 < 1.0  # not the 1000 B chunk's 8 s at the new rate
+        client.close()
+        far.close()
+
+
 def test_a_rate_set_back_up_frees_the_link_at_once():
     """A chunk sent at 1 bit/s held the link for its bits' time at that rate (8 kB: over two
     hours), whatever the rate became after it; now they are timed at the rate in force."""

@@ -287,6 +287,9 @@ def test_a_transfer_names_every_parameter_of_its_sensor() -> None:
     with pytest.raises(MessageRejected, match="needs sigma_r") as info:
         decode(pack(d), Transfer)
     assert info.value.reason == "invalid"
+    position = {"kind": "position", "position": [0.0, 0.0]}  # sigma_pos has a default: taken
+    d = {**raw(VALID_TRANSFER), "sensor": position, "eta": [10.0, 20.0], "P_eta": [[4, 0], [0, 4]]}
+    assert decode(pack(d), Transfer).sensor.kind == "position"
 
 
 @pytest.mark.parametrize(("i", "typ"), [(1, Truth), (4, EstimateMsg)])

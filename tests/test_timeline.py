@@ -259,3 +259,20 @@ def test_a_schedule_that_cannot_be_the_episodes_is_refused_and_counted(
         tracker.handle(received(keys.schedule("e"), encode(msg)))
     assert svc.rejects.by_reason() == {"invalid": 1}
     assert tracker.episodes.get("e").tracker.addressed  # type: ignore[union-attr]
+
+
+def test_the_primarys_own_schedule_is_heard_at_an_offset_of_no_whole_microsecond() -> None:
+    """The primary stamps its first sample in whole microseconds (-0.123457 s for an offset of
+    -0.1234567 s): the bounds are checked in microseconds too, or its own schedule is refused."""
+    from tltrack.wire.messages import Schedule
+
+    cfg = make_config(
+        BASE,
+        max_clock_offset_s=0.1234567,
+        primary_clock_offset_s=-0.1234567,
+        sources=[{"id": "s1", "period_s": 4.0}],
+    )
+    t0 = cfg.timeline.stamp(PRIMARY, 0) / US
+    src = SourceEpisode(cfg, 0, "ukf", "s1")
+    src.heard(Schedule(episode="e", sender=keys.PRIMARY, k=0, t_sensor=0.0, period_s=1.0, t0_s=t0))
+    assert src.addressed

@@ -65,7 +65,7 @@ def reproduce(
     else:
         todo, write = rep.jobs(base) + rep.loss_jobs(base), rep.report
     checkpoint = checked_checkpoint(checkpoint)
-    checked_folder(out)
+    checked_folder(out, writes=("report.md", "summary.json", "losses.md", "table2_pf.md"))
     with engine_pool(scheduler, workers) as executor, progress_bar(runs, "reproduce") as bar:
         # a job's clock starts when its sweep does (run_all's first, empty advance), not while
         # it waits for the sweeps before it

@@ -129,7 +129,7 @@ def study(
     }
     total = runs * configurations.get(name, 1)
     checkpoint = checked_checkpoint(checkpoint)
-    checked_folder(out, writes=(f"{name}.md", f"{name}.json", f"{name}.png"))
+    checked_folder(out, writes=(f"{name}.md", f"{name}.json"))  # its figures' names vary
     with engine_pool(scheduler, workers) as executor, progress_bar(total, name) as bar:
         task = bar.add_task(name, total=total if name in configurations else None)
         runner = studies.Runner(

@@ -103,6 +103,9 @@ PRIMARY = "primary"
 MAX_CLUTTER_RATE = 1_000_000
 #: the most steps a run may have (K, or duration_s / Ts)
 MAX_STEPS = 100_000
+#: the most steps of the grid of every operator's sample times an episode may hold: the truth
+#: holds a state at each (K = 100000 with a phase of 1 ms asked for 1e8, 4 GB)
+MAX_TICKS = 10_000_000
 #: the longest period, clock offset: 1e6 s (11.6 days); K of them stay well inside the int64
 #: microseconds of the timeline (:mod:`tltrack.config.timeline`), where 1e200 s overflowed
 LONGEST_S = 1e6
@@ -486,7 +489,10 @@ class Config(BaseModel):
         json_schema_extra=unit("1"),
     )
     kappa: float = Field(
-        2.0, allow_inf_nan=False, description="UKF scaling parameter", json_schema_extra=unit("1")
+        2.0,
+        allow_inf_nan=False,
+        description="UKF scaling parameter; n + kappa > 0",
+        json_schema_extra=unit("1"),
     )
     lost_threshold_m: float = Field(
         100.0,
@@ -658,7 +664,14 @@ class Config(BaseModel):
                     f"at most {MAX_STEPS}"
                 )
             object.__setattr__(self, "K", K)
-        grid = self.timeline.grid_us  # refuses periods and phases with no common grid
+        timeline = self.timeline
+        grid = timeline.grid_us  # refuses periods and phases with no common grid
+        if timeline.ticks > MAX_TICKS:  # the truth holds a state per tick
+            raise ValueError(
+                f"the sample times fall on a grid of {grid / 1000:g} ms: {timeline.ticks} of its "
+                f"steps in the episode, at most {MAX_TICKS} (fewer steps, or periods and phases "
+                "on a coarser grid)"
+            )
         if self.truth == "file" and grid != us(self.Ts):
             raise ValueError("a truth file is resampled at Ts: every period and phase must be Ts's")
 

@@ -236,7 +236,7 @@ def made_elsewhere(
     return found[0]
 
 
-def _full(batches: Sequence[Sequence[int]]) -> int:
+def full_batches(batches: Sequence[Sequence[int]]) -> int:
     """How many of ``batches`` (runs in order, cut into batches of the first one's size) are
     full: all but a short last one."""
     return len(batches) - (len(batches[-1]) < len(batches[0]))
@@ -337,7 +337,7 @@ class Checkpoint:
         overwritten."""
         if not batches:
             return None
-        bs, full = len(batches[0]), _full(batches)
+        bs, full = len(batches[0]), full_batches(batches)
         own, key = self.prefix_path(bs), self._prefix_key(bs)
         candidates: list[tuple[Path, Any]] = []
         if own.exists():
@@ -408,7 +408,7 @@ class Checkpoint:
         """Write the merged statistics of the first ``done`` of ``batches``, as plain JSON
         ``stats``, whole (:func:`write_whole`); a failure warns once and stops saving. A prefix
         ending in a short last batch is not written: it would fit no longer sweep."""
-        if not self._saving_prefix or done > _full(batches):
+        if not self._saving_prefix or done > full_batches(batches):
             return
         bs = len(batches[0])
         made: dict[str, Any] = {"key": self._prefix_key(bs), "environment": environment()}

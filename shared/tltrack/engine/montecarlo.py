@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tltrack.config import Config
-from tltrack.engine.checkpoint import Checkpoint
+from tltrack.engine.checkpoint import Checkpoint, full_batches
 from tltrack.engine.driver import (
     Channel,
     Direct,
@@ -565,7 +565,7 @@ def run_sweep(
         if progress:
             progress(sum(len(b) for b in batches[:merged]))
 
-    full = sum(len(b) == len(batches[0]) for b in batches)  #: batches before a short last one
+    full = full_batches(batches)
 
     def save_prefix() -> None:
         if kept:  # the totals serialised now: no copy outlives a merge

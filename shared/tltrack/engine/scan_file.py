@@ -116,7 +116,7 @@ def read_scans(
         raise ScanFileError(f"cannot read {path}: {err.strerror}") from None
     except UnicodeDecodeError:
         raise ScanFileError(f"{path}: not a UTF-8 text file") from None
-    except csv.Error as err:  # a field over csv's 128 kB, a NUL byte
+    except csv.Error as err:  # a field over csv's 128 kB
         raise ScanFileError(f"{path}:{reader.line_num + 1}: not CSV: {err}") from None
     if not rows:
         raise ScanFileError(f"{path}: no detections")

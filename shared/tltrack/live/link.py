@@ -114,7 +114,7 @@ class LinkEmulator:
 
     def shape(self, direction: Direction = "both", **changes: Any) -> None:
         """Change ``delay_s``, ``jitter_s``, ``rate_bps`` or ``stalled`` of one direction or both;
-        it applies to every chunk read from now on."""
+        it applies to every chunk read from now on (a higher rate also to the chunk still going)."""
         unknown = set(changes) - _SHAPE_FIELDS
         if unknown:
             raise ValueError(f"no such link setting: {', '.join(sorted(unknown))}")
@@ -162,9 +162,9 @@ class LinkEmulator:
 
     def _write(self, conn: _Connection, b: socket.socket, held: queue.Queue[Any], d: Way) -> None:
         """Send each chunk to ``b`` once due, not stalled, and within the rate."""
-        #: when the previous chunk began to go, and its bits: it has gone at the rate *now*, so
-        #: a rate set back up frees the link at once (a free time at the old rate held it)
-        last: tuple[float, int] | None = None
+        #: the previous chunk: when it began to go, its bits, and when they had gone at its rate;
+        #: a higher rate since lets them go sooner (a chunk at 1 bit/s held the link for hours)
+        last: tuple[float, int, float] | None = None
         with contextlib.suppress(OSError):
             while (item := held.get()) is not None:
                 due, data = item
@@ -175,7 +175,7 @@ class LinkEmulator:
                     free = (
                         0.0
                         if last is None or s.rate_bps is None
-                        else last[0] + last[1] / s.rate_bps
+                        else min(last[2], last[0] + last[1] / s.rate_bps)
                     )
                     if not s.stalled and now >= max(due, free):
                         break
@@ -183,7 +183,8 @@ class LinkEmulator:
                 if conn.closed.is_set():
                     return
                 if s.rate_bps is not None:
-                    last = (max(free, time.monotonic()), len(data) * 8)
+                    start, bits = max(free, time.monotonic()), len(data) * 8
+                    last = (start, bits, start + bits / s.rate_bps)
                 b.sendall(data)
         conn.close()
         with self._lock, contextlib.suppress(ValueError):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from tltrack.config import Config
-from tltrack.config.timeline import US, Clock, Timeline
+from tltrack.config.timeline import US, Clock, Timeline, us
 from tltrack.engine.driver import Link, Primaries, Sources, StepRecord
 from tltrack.engine.montecarlo import check_filters
 from tltrack.engine.names import reported_name
@@ -195,7 +195,8 @@ class SourceEpisode(_Operator):
         ours, cfg = self.timeline, self.cfg
         if round(schedule.period_s * US) != ours.clocks[PRIMARY].period_us:
             raise ValueError(f"period_s = {schedule.period_s:g} s, not the episode's Ts")
-        if not -cfg.max_clock_offset_s <= schedule.t0_s < cfg.Ts + cfg.max_clock_offset_s:
+        most = us(cfg.max_clock_offset_s)  # in whole microseconds, as the primary stamps it
+        if not -most <= round(schedule.t0_s * US) < us(cfg.Ts) + most:
             raise ValueError(f"t0_s = {schedule.t0_s:g} s: no phase and clock offset give it")
         primary = Clock(round(schedule.period_s * US), 0, round(schedule.t0_s * US))
         self._view = dataclasses.replace(ours, clocks={**ours.clocks, PRIMARY: primary})

@@ -325,8 +325,12 @@ class Transfer(Message):
                 "invalid",
                 f"k ({self.k}) must be k_apply - 1 ({self.k_apply - 1}), or give t_apply",
             )
-        missing = [p.name for p in self.sensor.declared if p.name not in self.sensor.params]
-        if missing:  # the primary builds the source's sensor from it: every parameter, filled in
+        missing = [
+            p.name
+            for p in self.sensor.declared
+            if p.name not in self.sensor.params and p.default is None
+        ]
+        if missing:  # the primary builds the source's sensor from it: one it cannot default
             raise PydanticCustomError(
                 "invalid", f"sensor: a {self.sensor.kind} sensor needs {', '.join(missing)}"
             )
@@ -405,15 +409,12 @@ class EpisodeStart(Message):
             raise PydanticCustomError("non_finite", "config holds a NaN or infinity")
         try:  # untrusted: a kind it names must be registered here; nothing is imported
             cfg = Config.model_validate(v, context={"trusted": False})
-            canonical = cfg.model_dump(mode="json")
-            # what receivers parse: its derived fields (K from duration_s) must pass too
-            Config.model_validate(canonical, context={"trusted": False})
         except ValidationError as err:
             unknown = any(e["type"] == "unknown_kind" for e in err.errors())
             detail = {"detail": describe_validation_error(err)}
             reason = "unknown_kind" if unknown else "invalid"
             raise PydanticCustomError(reason, "config: {detail}", detail) from None
-        return canonical  # presets filled in, tuples as lists
+        return cfg.model_dump(mode="json")  # canonical: presets filled in, tuples as lists
 
     def parsed_config(self) -> Any:
         """The validated :class:`tltrack.config.Config`."""
