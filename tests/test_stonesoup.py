@@ -96,6 +96,40 @@ def test_a_motion_model_runs_over_any_interval() -> None:
     np.testing.assert_array_equal(m.covar(time_interval=two), SETUP.motion.with_period(2.0).Q)
 
 
+def test_a_motion_model_refuses_to_predict_backwards_or_without_a_time() -> None:
+    """Backwards, CT's noise was NaN in both filters' covariance; with no timestamp, an
+    AttributeError."""
+    m = Motion(model=SETUP.motion)
+    x = GaussianState(StateVector(CFG.x0), np.eye(5))
+    for bad in (datetime.timedelta(seconds=-5.0), None):
+        with pytest.raises(ValueError, match="predicts forward in time"):
+            m.covar(time_interval=bad)  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="predicts forward in time"):
+            m.function(x, time_interval=bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("noise", "says"),
+    [
+        (np.diag([-500.0, -1.0]), "positive-definite"),  # went out as near certainty (1e-9)
+        (np.full((2, 2), np.nan), "finite 2 x 2"),
+        (np.eye(3), "finite 2 x 2"),
+    ],
+    ids=["negative", "nan", "3x3"],
+)
+def test_a_sensor_refuses_a_noise_covariance_that_is_none(noise: np.ndarray, says: str) -> None:
+    with pytest.raises(ValueError, match=says):
+        sensor("s1", noise)
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning", "ignore::RuntimeWarning")  # Stone Soup's own
+def test_a_broken_prediction_sends_no_transfer() -> None:
+    """Its covariance floored for the wire, a NaN or negative one went out as near certainty."""
+    prediction = GaussianState(StateVector(CFG.x0), CovarianceMatrix(-np.diag(CFG.P0_diag)))
+    with pytest.raises(ValueError, match="covariance is broken"):
+        transfer_message(prediction, sensor("s1"), episode="e1", source="s1", k=4, t_sensor=12.5)
+
+
 def test_a_transfer_goes_out_and_comes_back_as_a_detection() -> None:
     s = sensor("s1")
     prediction = GaussianState(StateVector(CFG.x0), CovarianceMatrix(np.diag(CFG.P0_diag)))

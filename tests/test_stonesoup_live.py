@@ -5,6 +5,7 @@ on, and its TL-UKF gives the engine's TL-UKF of the same episode."""
 from __future__ import annotations
 
 import datetime
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +33,7 @@ from tltrack.interop.stonesoup import (
 )
 from tltrack.live import supervisor
 from tltrack.wire import keys
-from tltrack.wire.messages import EpisodeStart, Measurement, Transfer, encode
+from tltrack.wire.messages import MAX_PAYLOAD_BYTES, EpisodeStart, Measurement, Transfer, encode
 from tltrack.wire.transport import Subscriber
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
@@ -100,8 +101,9 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
 
 
 def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
-    """A transfer on s1's key sent as s2, and a payload that is no transfer, are counted and
-    skipped; the good one after them is read."""
+    """A transfer on s1's key sent as s2, a payload that is no transfer, and one over the size
+    limit (dropped uncounted) are counted and skipped; the good one after them is read. Closed,
+    the reader ends at once (it spun on the closed subscriber)."""
     good = Transfer(
         episode="e", sender="s1", k=3, t_sensor=3.0, k_apply=4, sensor=RADAR,
         eta=[1000.0, 0.5], P_eta=[[25.0, 0.0], [0.0, 1e-4]],
@@ -115,11 +117,19 @@ def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
             key = keys.transfer("s1", "e")
             z.put(key, encode(good.model_copy(update={"sender": "s2"})))
             z.put(key, b"\x93not a transfer")
+            z.put(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1))
             z.put(key, encode(good))
             (got,) = [d for _, dets in reader for d in dets]
     assert (got.source, got.k_apply) == ("s1", 4)
     assert reader.rejects.count(key, "wrong_sender") == 1
-    assert reader.rejects.count(key) == 2
+    assert reader.rejects.count(key, "too_large") == 1
+    assert reader.rejects.count(key) == 3
+    reader.idle_s = None  # closed by the with: nothing will come, and it must not wait for it
+    after: list[object] = []
+    drain = threading.Thread(target=lambda: after.extend(reader), daemon=True)
+    drain.start()
+    drain.join(5.0)
+    assert not drain.is_alive() and after == []
 
 
 def test_a_stone_soup_source_writes_under_its_identity(tmp_path: Path) -> None:

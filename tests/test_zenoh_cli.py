@@ -37,6 +37,7 @@ from tltrack.wire.messages import (
     EstimateMsg,
     Measurement,
     Message,
+    Schedule,
     Tick,
     Transfer,
     Truth,
@@ -92,6 +93,10 @@ def on_their_keys() -> list[tuple[str, Message]]:
         (keys.transfer("s1", E), transfer()),
         (keys.source_estimate("s1", E), estimate(sender="s1")),
         (keys.primary_estimate("tl", E), estimate()),
+        (
+            keys.schedule(E),
+            Schedule(episode=E, sender="primary", k=0, t_sensor=T0, period_s=1.0, t0_s=0.0),
+        ),
     ]
 
 
@@ -245,7 +250,10 @@ class _Unprintable:
     ids=["none", "str", "stats-none", "stats-deep", "bad-key-object"],
 )
 def test_the_decoder_never_raises(key: Any, payload: Any) -> None:
-    assert line(key, payload)["refused"]
+    """Each is refused; only a key that cannot be printed is the decoder's own "internal" (the
+    statistics' None was one, a TypeError)."""
+    got = line(key, payload)
+    assert got["refused"] and (got["refused"] == "internal") == isinstance(key, _Unprintable)
 
 
 # ---- the config file --------------------------------------------------------------------------

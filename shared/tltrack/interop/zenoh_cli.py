@@ -34,6 +34,7 @@ from tltrack.wire.messages import (
     Measurement,
     Message,
     MessageRejected,
+    Schedule,
     Tick,
     Transfer,
     Truth,
@@ -52,6 +53,7 @@ EXPECTED: dict[str, tuple[type[Message], ...]] = {
     "transfer": (Transfer,),
     "source_estimate": (EstimateMsg,),
     "primary_estimate": (EstimateMsg,),
+    "schedule": (Schedule,),
 }
 
 

@@ -100,7 +100,8 @@ class MessageRejected(Exception):  # noqa: N818 (the name the services use)
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Id = Annotated[str, Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")]
 Step = Annotated[int, Field(ge=0, le=MAX_K)]
-Timestamp = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+#: seconds since the epoch (time.time()), before the year 5000: a later one overflows a datetime
+Timestamp = Annotated[float, Field(ge=0, le=1e11, allow_inf_nan=False)]
 
 
 def _as_list(v: Any) -> Any:
@@ -638,6 +639,8 @@ class RejectCounter:
 def json_object(payload: bytes) -> dict[str, Any]:
     """A JSON object (a service's statistics, the scorer's summary); else :class:`ValueError`,
     saying why, for any payload (json.loads raises RecursionError on deep nesting)."""
+    if not isinstance(payload, bytes | bytearray | memoryview):
+        raise ValueError(f"payload is {type(payload).__name__}, not bytes")
     try:
         data = json.loads(payload)
     except RecursionError:  # absurdly nested
@@ -650,7 +653,7 @@ def json_object(payload: bytes) -> dict[str, Any]:
 def decode_stats(payload: bytes) -> dict[str, Any]:
     """A service's statistics (JSON, :meth:`~tltrack.live.service.Service.publish_stats`): an
     object of at most :data:`MAX_PAYLOAD_BYTES`; else :class:`ValueError`, saying why."""
-    if len(payload) > MAX_PAYLOAD_BYTES:
+    if isinstance(payload, bytes | bytearray | memoryview) and len(payload) > MAX_PAYLOAD_BYTES:
         raise ValueError(f"{len(payload)} B > {MAX_PAYLOAD_BYTES} B")
     return json_object(payload)
 

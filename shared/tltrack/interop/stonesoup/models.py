@@ -58,6 +58,21 @@ def _floats(state: Any) -> Array:
     return np.asarray(state.state_vector, dtype=float)
 
 
+#: the periods a motion model keeps its matrices for (a new interval each step would grow it)
+_KEPT_PERIODS = 64
+
+
+def _spd(P: Any, n: int, name: str) -> Array:
+    """``P`` as an (n, n) finite, symmetric, positive-definite matrix, or a ValueError naming it:
+    a transfer's covariance is made from it, and a broken one went out as near certainty."""
+    P = np.asarray(P, dtype=float)
+    if P.shape != (n, n) or not np.all(np.isfinite(P)):
+        raise ValueError(f"{name} must be a finite {n} x {n} matrix, not {P.shape} {P.tolist()}")
+    if not np.allclose(P, P.T) or np.linalg.eigvalsh(P)[0] <= 0:
+        raise ValueError(f"{name} must be symmetric and positive-definite: {P.tolist()}")
+    return P
+
+
 def _full(spec: Any) -> SensorSpec:
     """``spec`` (or the mapping of one) with every parameter its kind declares: the defaults
     filled in, and a ValueError naming those with none (a transfer carries a full description)."""
@@ -98,7 +113,7 @@ class Sensor(StoneSoupMeasurementModel, GaussianModel):
         self.model: MeasurementModel = from_spec(self.spec, layout)
         if self.noise_covar is None:
             self.noise_covar = self.model.R(1.0)
-        self.noise_covar = CovarianceMatrix(self.noise_covar)
+        self.noise_covar = CovarianceMatrix(_spd(self.noise_covar, self.model.n_z, "noise_covar"))
         self._angular = tuple(bool(a) for a in getattr(self.model, "angular", ()))
 
     @property
@@ -175,7 +190,12 @@ class Motion(TransitionModel, GaussianModel, TimeVariantModel):
         return int(self.model.n)
 
     def _over(self, time_interval: datetime.timedelta) -> MotionModel:
+        """The model over ``time_interval``, forward only (CT's noise backwards is NaN)."""
+        if not isinstance(time_interval, datetime.timedelta) or time_interval.total_seconds() < 0:
+            raise ValueError(f"a motion model predicts forward in time, not over {time_interval!r}")
         dt = time_interval.total_seconds()
+        if len(self._by_dt) >= _KEPT_PERIODS:
+            self._by_dt.clear()
         if dt not in self._by_dt:
             self._by_dt[dt] = self.model.with_period(dt)
         return self._by_dt[dt]

@@ -80,8 +80,14 @@ def transfer_message(
     **unscented: float,
 ) -> Transfer:
     """What source ``source`` sends after its step ``k``: the transfer for step k + 1, described by
-    its sensor. Its covariance is made fit for the wire (symmetric, positive-definite)."""
+    its sensor. Its covariance is made fit for the wire (symmetric, positive-definite), unless it
+    is broken (not finite, or negative beyond round-off: a ValueError, not a near-certain one)."""
     eta, P = predicted_observation(prediction, sensor, **unscented)
+    P = np.asarray(P, dtype=float)
+    if not np.all(np.isfinite(P)) or np.linalg.eigvalsh(0.5 * (P + P.T))[0] < -1e-9 * max(
+        1.0, float(np.trace(np.abs(P)))
+    ):
+        raise ValueError(f"the predicted observation's covariance is broken: {P.tolist()}")
     return Transfer(
         episode=episode,
         sender=source,

@@ -86,9 +86,11 @@ class TransferReader(DetectionReader):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.rejects = RejectCounter()  #: what it refused, per key and reason
-        self._sub = Subscriber(self.session, [self.key])
+        self._sub = Subscriber(self.session, [self.key], rejects=self.rejects)
+        self._closed = False  #: closed (by another thread, at shutdown): the generator ends
 
     def close(self) -> None:
+        self._closed = True
         self._sub.close()
 
     def __enter__(self) -> TransferReader:
@@ -120,7 +122,7 @@ class TransferReader(DetectionReader):
     def detections_gen(self) -> Iterator[tuple[datetime.datetime, set[TransferDetection]]]:
         taken = 0
         last = time.monotonic()
-        while self.count is None or taken < self.count:
+        while (self.count is None or taken < self.count) and not self._closed:
             item = self._sub.recv(timeout=0.1)
             if item is None:
                 if self.idle_s is not None and time.monotonic() - last > self.idle_s:
