@@ -122,6 +122,22 @@ def test_a_sensor_refuses_a_noise_covariance_that_is_none(noise: np.ndarray, say
         sensor("s1", noise)
 
 
+def test_a_sensor_refuses_a_state_layout_it_cannot_read() -> None:
+    """Stone Soup's [x, y, vx, vy] with mapping (0, 1) took (1, 2) as the velocity: a Doppler
+    sensor read y as vx, silently; (0,) or (0, 7) raised IndexError at the first update."""
+    doppler = {"kind": "range-bearing-doppler", "sigma_r": 10.0, "sigma_bearing": 1e-3}
+    for mapping, says in (((0,), "mapping: two distinct"), ((0, 7), "mapping: two distinct")):
+        with pytest.raises(ValueError, match=says):
+            Sensor(spec=doppler, ndim_state=4, mapping=mapping)
+    with pytest.raises(ValueError, match=r"velocity_mapping \(1, 2\) overlaps"):
+        Sensor(spec=doppler, ndim_state=4, mapping=(0, 1))
+    assert (
+        Sensor(spec=doppler, ndim_state=4, mapping=(0, 1), velocity_mapping=(2, 3)).ndim_meas == 3
+    )
+    radar = {"kind": "range-bearing", "sigma_r": 10.0, "sigma_bearing": 1e-3}
+    assert Sensor(spec=radar, ndim_state=4, mapping=(0, 1)).ndim_meas == 2  # reads no velocity
+
+
 @pytest.mark.filterwarnings("ignore::UserWarning", "ignore::RuntimeWarning")  # Stone Soup's own
 def test_a_broken_prediction_sends_no_transfer() -> None:
     """Its covariance floored for the wire, a NaN or negative one went out as near certainty."""

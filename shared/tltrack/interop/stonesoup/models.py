@@ -73,6 +73,14 @@ def _spd(P: Any, n: int, name: str) -> Array:
     return P
 
 
+def _indices(mapping: Sequence[int], ndim_state: int, name: str) -> tuple[int, int]:
+    """Two distinct indices of a state of ``ndim_state``, or a ValueError naming ``name``."""
+    got = tuple(int(i) for i in mapping)
+    if len(got) != 2 or got[0] == got[1] or not all(0 <= i < ndim_state for i in got):
+        raise ValueError(f"{name}: two distinct indices of a state of {ndim_state}, not {got}")
+    return got[0], got[1]
+
+
 def _full(spec: Any) -> SensorSpec:
     """``spec`` (or the mapping of one) with every parameter its kind declares: the defaults
     filled in, and a ValueError naming those with none (a transfer carries a full description)."""
@@ -108,9 +116,13 @@ class Sensor(StoneSoupMeasurementModel, GaussianModel):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.spec = _full(self.spec)
-        vel = self.velocity_mapping or tuple(i + 1 for i in self.mapping)
-        layout = Layout(pos=(int(self.mapping[0]), int(self.mapping[1])), vel=(vel[0], vel[1]))
-        self.model: MeasurementModel = from_spec(self.spec, layout)
+        pos = _indices(self.mapping, self.ndim_state, "mapping")
+        vel = tuple(self.velocity_mapping or (i + 1 for i in pos))
+        self.model: MeasurementModel = from_spec(self.spec, Layout(pos=pos, vel=(vel[0], vel[1])))
+        if "range_rate_mps" in self.model.components:  # it reads the velocity: (vx, vy) must be
+            vel = _indices(vel, self.ndim_state, "velocity_mapping")
+            if set(vel) & set(pos):
+                raise ValueError(f"velocity_mapping {vel} overlaps the position's {pos}")
         if self.noise_covar is None:
             self.noise_covar = self.model.R(1.0)
         self.noise_covar = CovarianceMatrix(_spd(self.noise_covar, self.model.n_z, "noise_covar"))

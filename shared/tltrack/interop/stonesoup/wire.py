@@ -132,11 +132,16 @@ class TransferReader(DetectionReader):
             msg = self._accepted(item)
             if msg is None:
                 continue
-            det = detection(
-                msg,
-                ndim_state=self.ndim_state,
-                mapping=self.mapping,
-                velocity_mapping=self.velocity_mapping,
-            )
+            try:
+                det = detection(
+                    msg,
+                    ndim_state=self.ndim_state,
+                    mapping=self.mapping,
+                    velocity_mapping=self.velocity_mapping,
+                )
+            except ValueError as err:  # a sensor this state cannot express (its velocity)
+                self.rejects.add(item.key, "invalid")
+                log.warning("refused a transfer on %s: %s", item.key, err)
+                continue
             taken += 1
             yield det.timestamp, {det}
