@@ -162,6 +162,8 @@ def test_a_transfer_goes_out_and_comes_back_as_a_detection() -> None:
 def test_a_stacked_detection_is_the_product_of_its_likelihoods() -> None:
     own = Detection(StateVector([1400.0, 0.8]), measurement_model=sensor(PRIMARY))
     eta = Detection(StateVector([1410.0, 0.79]), measurement_model=sensor("s1", np.diag([9, 1e-4])))
+    with pytest.raises(ValueError, match=r"detection\(s\) \[1\] have no measurement model"):
+        stacked([own, Detection(StateVector([1410.0, 0.79]))])  # an AttributeError's traceback
     both = stacked([own, eta])
     x = GaussianState(StateVector(CFG.x0), np.eye(5))
     total = both.measurement_model.logpdf(both, x)
@@ -200,6 +202,19 @@ def test_estimates_become_stone_soup_tracks_and_tltracks_csv(tmp_path: Path) -> 
     write_csv(tmp_path / "ss.csv", tracks, scenario="ct", start=start, period=period)
     write_estimates(tmp_path / "tl.csv", "ct", sorted(rows, key=lambda r: (r[0], r[1])))
     assert (tmp_path / "ss.csv").read_text() == (tmp_path / "tl.csv").read_text()
+    from stonesoup.types.state import State
+    from stonesoup.types.track import Track
+
+    x = StateVector(np.zeros(5))
+    for bad, says in (
+        ([State(x, timestamp=start + period)], "a time and a covariance"),  # AttributeError
+        ([GaussianState(x, np.eye(5))], "a time and a covariance"),  # TypeError
+        # 0.6 and 1.4 periods were both step 1: duplicate rows
+        ([GaussianState(x, np.eye(5), timestamp=start + period * f) for f in (0.6, 1.4)], "step"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            write_csv(tmp_path / "x.csv", {"ukf": Track(bad)}, scenario="ct", start=start,
+                      period=period)  # fmt: skip
 
 
 def test_a_stone_soup_ukf_pipeline_gives_the_engines_estimates() -> None:

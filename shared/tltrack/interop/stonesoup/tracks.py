@@ -43,12 +43,21 @@ def to_tracks(
 def from_tracks(
     tracks: Mapping[str, Track], *, start: datetime.datetime, period: datetime.timedelta
 ) -> list[Estimated]:
-    """The estimates of Stone Soup tracks (by filter name) whose states carry a covariance; a
-    state's step is its time's whole number of periods after ``start``."""
+    """The estimates of Stone Soup tracks (by filter name), whose states carry a covariance and
+    a time a whole number of periods after ``start`` (its step k), one per step; else a
+    ValueError naming the state (one without, or off the grid, made a rounded duplicate)."""
     out: list[Estimated] = []
     for name, track in tracks.items():
-        for state in track.states:
-            k = round((state.timestamp - start) / period)
+        seen: set[int] = set()
+        for i, state in enumerate(track.states):
+            where = f"{name}'s state {i} ({state.timestamp})"
+            if state.timestamp is None or not hasattr(state, "covar"):
+                raise ValueError(f"{where}: an estimate has a time and a covariance")
+            steps = (state.timestamp - start) / period
+            k = round(steps)
+            if abs(steps - k) > 1e-6 or k in seen:
+                raise ValueError(f"{where}: not a step of its own {period} after {start}")
+            seen.add(k)
             x = np.asarray(state.state_vector, dtype=float)[:, 0]
             out.append((k, name, x, np.asarray(state.covar, dtype=float)))
     return sorted(out, key=lambda r: (r[0], r[1]))

@@ -142,6 +142,8 @@ def stacked(detections: Sequence[Detection], when: datetime.datetime | None = No
     ``when``: its timestamp (default: the first's)."""
     if not detections:
         raise ValueError("nothing to stack")
+    if none := [i for i, d in enumerate(detections) if d.measurement_model is None]:
+        raise ValueError(f"detection(s) {none} have no measurement model: a stack needs each one's")
     z = np.vstack([np.asarray(d.state_vector, dtype=float) for d in detections])
     return Detection(
         StateVector(z),
