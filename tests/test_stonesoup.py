@@ -154,6 +154,13 @@ def test_a_transfer_goes_out_and_comes_back_as_a_detection() -> None:
     assert (back.k_apply, back.sender, back.sensor) == (5, "s1", s.spec)
     det = detection(back, ndim_state=5, mapping=LAYOUT.pos, velocity_mapping=LAYOUT.vel)
     assert (det.k_apply, det.source, det.timestamp) == (5, "s1", timestamp(12.5))
+    two = datetime.timedelta(seconds=2.0)  # the primary's period: dated at k_apply's time
+    assert detection(back, ndim_state=5, mapping=LAYOUT.pos, period=two).timestamp == timestamp(
+        14.5
+    )
+    off_clock = back.model_copy(update={"t_apply": 10.0})
+    with pytest.raises(ValueError, match="dated on the primary's clock"):
+        detection(off_clock, ndim_state=5, mapping=LAYOUT.pos, period=two)
     np.testing.assert_allclose(np.asarray(det.state_vector, dtype=float)[:, 0], back.eta)
     np.testing.assert_allclose(det.measurement_model.covar(), back.P_eta)
     assert det.measurement_model.spec == s.spec
@@ -239,8 +246,10 @@ def test_a_stone_soup_ukf_pipeline_gives_the_engines_estimates() -> None:
         zs = Detection(StateVector(sim.z["s1"][k - 1]), timestamp=t, measurement_model=src_sensor)
         with_transfer = z
         if sent is not None:  # the source's transfer for step k, as a primary receives it
-            eta = detection(decode(encode(sent), Transfer), ndim_state=5, mapping=LAYOUT.pos)
-            with_transfer = stacked([z, eta], when=t)
+            back = decode(encode(sent), Transfer)
+            eta = detection(back, ndim_state=5, mapping=LAYOUT.pos, period=T)
+            assert eta.timestamp == t  # dated at the step it is for, not the source's k - 1
+            with_transfer = stacked([z, eta])
         for name, d in (("source-ukf", zs), ("ukf", z), ("tl-ukf", with_transfer)):
             prediction = predictor.predict(state[name], timestamp=t)
             state[name] = updater.update(SingleHypothesis(prediction, d))

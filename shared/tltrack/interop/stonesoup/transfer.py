@@ -102,8 +102,8 @@ def transfer_message(
 
 class TransferDetection(Detection):
     """A source's transfer as a detection: eta_hat, with the source's sensor and noise P_eta_eta
-    as its measurement model. ``timestamp`` is when the source made it; ``k_apply`` the step it
-    is for."""
+    as its measurement model. ``timestamp`` is the time of the step it is for (``k_apply``) when
+    the primary's period is known, else when the source made it (see :func:`detection`)."""
 
     source: str = Property(doc="The id of the source that sent it.")
     k_apply: int = Property(doc="The step it is a statement about.")
@@ -116,9 +116,17 @@ def detection(
     mapping: Sequence[int],
     velocity_mapping: Sequence[int] | None = None,
     when: datetime.datetime | None = None,
+    period: datetime.timedelta | None = None,
 ) -> TransferDetection:
     """The detection of a received transfer, for a state whose (x, y) sit at ``mapping`` (and
-    (vx, vy) at ``velocity_mapping``). ``when``: its timestamp (default: its ``t_sensor``)."""
+    (vx, vy) at ``velocity_mapping``).
+
+    Its timestamp is ``when`` if given; else, with the primary's ``period`` on the paper's shared
+    clock, the time of the step it is about, its ``t_sensor`` (the source's step k) plus
+    (k_apply - k) periods: Stone Soup predicts to a detection's time, and dated at t_sensor a
+    transfer would be applied a period early. Else its ``t_sensor``. A transfer stamped with
+    ``t_apply`` (operators on their own clocks) is dated on the primary's clock, which this
+    does not know: a ValueError unless ``when`` is given."""
     model = Sensor(
         spec=msg.sensor,
         ndim_state=ndim_state,
@@ -126,6 +134,10 @@ def detection(
         velocity_mapping=None if velocity_mapping is None else tuple(velocity_mapping),
         noise_covar=CovarianceMatrix(np.asarray(msg.P_eta, dtype=float)),
     )
+    if when is None and period is not None:
+        if msg.t_apply is not None:
+            raise ValueError("a transfer for t_apply is dated on the primary's clock: give when")
+        when = timestamp(msg.t_sensor) + (msg.k_apply - msg.k) * period
     return TransferDetection(
         StateVector(np.asarray(msg.eta, dtype=float)),
         timestamp=timestamp(msg.t_sensor) if when is None else when,

@@ -66,7 +66,9 @@ class TransferWriter:
 
 class TransferReader(DetectionReader):
     """A Stone Soup detection feeder of the transfers a session receives: each as a
-    :class:`~tltrack.interop.stonesoup.transfer.TransferDetection` at its source's time.
+    :class:`~tltrack.interop.stonesoup.transfer.TransferDetection`, dated at the step it is for
+    given the primary's ``period`` (else at its source's time; see
+    :func:`~tltrack.interop.stonesoup.transfer.detection`).
 
     It subscribes when made (what arrives before it is read waits in a bounded queue), and stops
     after ``count`` transfers, or when none has come for ``idle_s`` seconds. Close it, or use it
@@ -78,6 +80,9 @@ class TransferReader(DetectionReader):
     mapping: Sequence[int] = Property(doc="The state's (x, y) indices.")
     velocity_mapping: Sequence[int] | None = Property(
         default=None, doc="The state's (vx, vy) indices; default: each position index + 1."
+    )
+    period: datetime.timedelta | None = Property(
+        default=None, doc="The primary's period: date each transfer at the step it is for."
     )
     key: str = Property(default=keys.TRANSFERS, doc="The key expression to subscribe to.")
     count: int | None = Property(default=None, doc="Stop after this many transfers.")
@@ -138,8 +143,9 @@ class TransferReader(DetectionReader):
                     ndim_state=self.ndim_state,
                     mapping=self.mapping,
                     velocity_mapping=self.velocity_mapping,
+                    period=self.period,
                 )
-            except ValueError as err:  # a sensor this state cannot express (its velocity)
+            except ValueError as err:  # a sensor this state cannot express, a time it cannot date
                 self.rejects.add(item.key, "invalid")
                 log.warning("refused a transfer on %s: %s", item.key, err)
                 continue
