@@ -101,9 +101,10 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
 
 
 def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
-    """A transfer on s1's key sent as s2, a payload that is no transfer, and one over the size
-    limit (dropped uncounted) are counted and skipped; the good one after them is read. Closed,
-    the reader ends at once (it spun on the closed subscriber)."""
+    """A transfer on s1's key sent as s2, a payload that is no transfer, one over the size limit
+    (dropped uncounted), the good one again and one for an earlier step (a second update, a
+    prediction backwards) are counted and skipped; the good ones are read. Closed, the reader
+    ends at once (it spun on the closed subscriber)."""
     good = Transfer(
         episode="e", sender="s1", k=3, t_sensor=3.0, k_apply=4, sensor=RADAR,
         eta=[1000.0, 0.5], P_eta=[[25.0, 0.0], [0.0, 1e-4]],
@@ -112,18 +113,23 @@ def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
         s.start_router()
         with (
             supervisor.client(s.endpoint) as z,
-            TransferReader(session=z, count=1, idle_s=20.0, **CT) as reader,
+            TransferReader(session=z, count=2, idle_s=20.0, **CT) as reader,
         ):
             key = keys.transfer("s1", "e")
             z.put(key, encode(good.model_copy(update={"sender": "s2"})))
             z.put(key, b"\x93not a transfer")
             z.put(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1))
             z.put(key, encode(good))
-            (got,) = [d for _, dets in reader for d in dets]
-    assert (got.source, got.k_apply) == ("s1", 4)
+            z.put(key, encode(good))
+            z.put(key, encode(good.model_copy(update={"k": 1, "k_apply": 2})))
+            z.put(key, encode(good.model_copy(update={"k": 4, "k_apply": 5})))
+            got = [d for _, dets in reader for d in dets]
+    assert [(d.source, d.k_apply) for d in got] == [("s1", 4), ("s1", 5)]
     assert reader.rejects.count(key, "wrong_sender") == 1
     assert reader.rejects.count(key, "too_large") == 1
-    assert reader.rejects.count(key) == 3
+    assert reader.rejects.count(key, "duplicate") == 1
+    assert reader.rejects.count(key, "late_transfer") == 1
+    assert reader.rejects.count(key) == 5
     reader.idle_s = None  # closed by the with: nothing will come, and it must not wait for it
     after: list[object] = []
     drain = threading.Thread(target=lambda: after.extend(reader), daemon=True)

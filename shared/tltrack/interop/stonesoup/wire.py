@@ -64,6 +64,10 @@ class TransferWriter:
         self.close()
 
 
+#: the (episode, source) pairs whose last step a reader keeps
+_KEPT_LINKS = 1024
+
+
 class TransferReader(DetectionReader):
     """A Stone Soup detection feeder of the transfers a session receives: each as a
     :class:`~tltrack.interop.stonesoup.transfer.TransferDetection`, dated at the step it is for
@@ -93,6 +97,10 @@ class TransferReader(DetectionReader):
         self.rejects = RejectCounter()  #: what it refused, per key and reason
         self._sub = Subscriber(self.session, [self.key], rejects=self.rejects)
         self._closed = False  #: closed (by another thread, at shutdown): the generator ends
+        #: (episode, source) -> the last step a transfer of it was for: one for that step again
+        #: would be a second update on the same statement, one for an earlier step a prediction
+        #: backwards
+        self._last: dict[tuple[str, str], int] = {}
 
     def close(self) -> None:
         self._closed = True
@@ -117,10 +125,18 @@ class TransferReader(DetectionReader):
             refused: tuple[str, str] | None = ("wrong_key", f"{item.key} is not a transfer key")
         else:
             refused = admission.refusal(info, msg)
+        last = self._last.get((msg.episode, msg.sender))
+        if refused is None and last is not None and msg.k_apply <= last:
+            why = "a second" if msg.k_apply == last else f"after the one for step {last}"
+            reason = "duplicate" if msg.k_apply == last else "late_transfer"
+            refused = (reason, f"{why} transfer for step {msg.k_apply} from {msg.sender}")
         if refused is not None:
             self.rejects.add(item.key, refused[0])
             log.warning("refused a transfer on %s: %s", item.key, refused[1])
             return None
+        self._last[(msg.episode, msg.sender)] = msg.k_apply
+        if len(self._last) > _KEPT_LINKS:
+            self._last.pop(next(iter(self._last)))  # the oldest episode's
         return msg
 
     @BufferedGenerator.generator_method
