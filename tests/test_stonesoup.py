@@ -27,6 +27,7 @@ from tltrack.interop.stonesoup import (
     Motion,
     Sensor,
     detection,
+    from_tracks,
     predicted_observation,
     stacked,
     timestamp,
@@ -154,13 +155,15 @@ def test_a_transfer_goes_out_and_comes_back_as_a_detection() -> None:
     assert (back.k_apply, back.sender, back.sensor) == (5, "s1", s.spec)
     det = detection(back, ndim_state=5, mapping=LAYOUT.pos, velocity_mapping=LAYOUT.vel)
     assert (det.k_apply, det.source, det.timestamp) == (5, "s1", timestamp(12.5))
-    two = datetime.timedelta(seconds=2.0)  # the primary's period: dated at k_apply's time
-    assert detection(back, ndim_state=5, mapping=LAYOUT.pos, period=two).timestamp == timestamp(
-        14.5
-    )
+    steps = (timestamp(100.0), datetime.timedelta(seconds=2.0))  # the primary's step grid
+    dated = detection(back, ndim_state=5, mapping=LAYOUT.pos, steps=steps)
+    assert dated.timestamp == timestamp(110.0)  # its step 5, whatever the source's clock said
     off_clock = back.model_copy(update={"t_apply": 10.0})
     with pytest.raises(ValueError, match="dated on the primary's clock"):
-        detection(off_clock, ndim_state=5, mapping=LAYOUT.pos, period=two)
+        detection(off_clock, ndim_state=5, mapping=LAYOUT.pos, steps=steps)
+    skewed = back.model_copy(update={"P_eta": [[1e4, 0.010001], [0.01, 1e-5]]})  # the wire's
+    assert decode(encode(skewed), Transfer) == skewed  # tolerance takes it, and so does a Sensor
+    detection(skewed, ndim_state=5, mapping=LAYOUT.pos)
     np.testing.assert_allclose(np.asarray(det.state_vector, dtype=float)[:, 0], back.eta)
     np.testing.assert_allclose(det.measurement_model.covar(), back.P_eta)
     assert det.measurement_model.spec == s.spec
@@ -217,11 +220,21 @@ def test_estimates_become_stone_soup_tracks_and_tltracks_csv(tmp_path: Path) -> 
         ([State(x, timestamp=start + period)], "a time and a covariance"),  # AttributeError
         ([GaussianState(x, np.eye(5))], "a time and a covariance"),  # TypeError
         # 0.6 and 1.4 periods were both step 1: duplicate rows
-        ([GaussianState(x, np.eye(5), timestamp=start + period * f) for f in (0.6, 1.4)], "step"),
+        ([GaussianState(x, np.eye(5), timestamp=start + period * 0.6)], "whole number of periods"),
+        ([GaussianState(x, np.eye(5), timestamp=start + period)] * 2, "a second state at step 1"),
     ):
         with pytest.raises(ValueError, match=says):
             write_csv(tmp_path / "x.csv", {"ukf": Track(bad)}, scenario="ct", start=start,
                       period=period)  # fmt: skip
+    thirtieth = datetime.timedelta(seconds=1 / 30)  # 33333 us: k periods drift off k / 30 s
+    frames = Track(
+        [
+            GaussianState(x, np.eye(5), timestamp=start + datetime.timedelta(seconds=k / 30))
+            for k in range(200)
+        ]
+    )
+    read = from_tracks({"ukf": frames}, start=start, period=thirtieth)
+    assert [k for k, *_ in read] == list(range(200))
 
 
 def test_a_stone_soup_ukf_pipeline_gives_the_engines_estimates() -> None:
@@ -247,7 +260,7 @@ def test_a_stone_soup_ukf_pipeline_gives_the_engines_estimates() -> None:
         with_transfer = z
         if sent is not None:  # the source's transfer for step k, as a primary receives it
             back = decode(encode(sent), Transfer)
-            eta = detection(back, ndim_state=5, mapping=LAYOUT.pos, period=T)
+            eta = detection(back, ndim_state=5, mapping=LAYOUT.pos, steps=(t0, T))
             assert eta.timestamp == t  # dated at the step it is for, not the source's k - 1
             with_transfer = stacked([z, eta])
         for name, d in (("source-ukf", zs), ("ukf", z), ("tl-ukf", with_transfer)):

@@ -40,6 +40,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(150)]
 
 K = 30
 CT = {"ndim_state": 5, "mapping": (0, 2), "velocity_mapping": (1, 3)}  # the episode's layout
+#: the primary's step grid: step 0 at the epoch, a period of 1 s
+GRID = (datetime.datetime(1970, 1, 1), datetime.timedelta(seconds=1.0))
 
 
 def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> None:
@@ -102,9 +104,10 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
 
 def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
     """A transfer on s1's key sent as s2, a payload that is no transfer, one over the size limit
-    (dropped uncounted), the good one again and one for an earlier step (a second update, a
-    prediction backwards) are counted and skipped; the good ones are read. Closed, the reader
-    ends at once (it spun on the closed subscriber)."""
+    (dropped uncounted before), one for the primary's own schedule (t_apply, which the reader's
+    step grid cannot date), the good one again and one for an earlier step (a second update, a
+    prediction backwards) are counted and skipped; the good ones are read, dated at their
+    steps. Closed, the reader ends at once (it spun on the closed subscriber)."""
     good = Transfer(
         episode="e", sender="s1", k=3, t_sensor=3.0, k_apply=4, sensor=RADAR,
         eta=[1000.0, 0.5], P_eta=[[25.0, 0.0], [0.0, 1e-4]],
@@ -113,23 +116,28 @@ def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
         s.start_router()
         with (
             supervisor.client(s.endpoint) as z,
-            TransferReader(session=z, count=2, idle_s=20.0, **CT) as reader,
+            TransferReader(session=z, count=2, idle_s=20.0, steps=GRID, **CT) as reader,
         ):
             key = keys.transfer("s1", "e")
             z.put(key, encode(good.model_copy(update={"sender": "s2"})))
             z.put(key, b"\x93not a transfer")
             z.put(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1))
+            z.put(key, encode(good.model_copy(update={"t_apply": 4.0})))
             z.put(key, encode(good))
             z.put(key, encode(good))
             z.put(key, encode(good.model_copy(update={"k": 1, "k_apply": 2})))
             z.put(key, encode(good.model_copy(update={"k": 4, "k_apply": 5})))
             got = [d for _, dets in reader for d in dets]
-    assert [(d.source, d.k_apply) for d in got] == [("s1", 4), ("s1", 5)]
+    assert [(d.source, d.k_apply, d.timestamp) for d in got] == [
+        ("s1", 4, GRID[0] + 4 * GRID[1]),
+        ("s1", 5, GRID[0] + 5 * GRID[1]),
+    ]
+    assert reader.rejects.count(key, "invalid") == 1
     assert reader.rejects.count(key, "wrong_sender") == 1
     assert reader.rejects.count(key, "too_large") == 1
     assert reader.rejects.count(key, "duplicate") == 1
     assert reader.rejects.count(key, "late_transfer") == 1
-    assert reader.rejects.count(key) == 5
+    assert reader.rejects.count(key) == 6
     reader.idle_s = None  # closed by the with: nothing will come, and it must not wait for it
     after: list[object] = []
     drain = threading.Thread(target=lambda: after.extend(reader), daemon=True)

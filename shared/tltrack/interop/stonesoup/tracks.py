@@ -44,8 +44,9 @@ def from_tracks(
     tracks: Mapping[str, Track], *, start: datetime.datetime, period: datetime.timedelta
 ) -> list[Estimated]:
     """The estimates of Stone Soup tracks (by filter name), whose states carry a covariance and
-    a time a whole number of periods after ``start`` (its step k), one per step; else a
-    ValueError naming the state (one without, or off the grid, made a rounded duplicate)."""
+    a time a whole number of periods after ``start`` (its step k, within a tenth of a period),
+    one per step; else a ValueError naming the state (one without, or off the grid, made a
+    rounded duplicate)."""
     out: list[Estimated] = []
     for name, track in tracks.items():
         seen: set[int] = set()
@@ -55,8 +56,10 @@ def from_tracks(
                 raise ValueError(f"{where}: an estimate has a time and a covariance")
             steps = (state.timestamp - start) / period
             k = round(steps)
-            if abs(steps - k) > 1e-6 or k in seen:
-                raise ValueError(f"{where}: not a step of its own {period} after {start}")
+            if abs(steps - k) > 0.1:  # datetime's microseconds: 1/30 s is 33333 us, and drifts
+                raise ValueError(f"{where}: not a whole number of periods {period} after {start}")
+            if k in seen:
+                raise ValueError(f"{where}: a second state at step {k}")
             seen.add(k)
             x = np.asarray(state.state_vector, dtype=float)[:, 0]
             out.append((k, name, x, np.asarray(state.covar, dtype=float)))

@@ -116,28 +116,31 @@ def detection(
     mapping: Sequence[int],
     velocity_mapping: Sequence[int] | None = None,
     when: datetime.datetime | None = None,
-    period: datetime.timedelta | None = None,
+    steps: tuple[datetime.datetime, datetime.timedelta] | None = None,
 ) -> TransferDetection:
     """The detection of a received transfer, for a state whose (x, y) sit at ``mapping`` (and
     (vx, vy) at ``velocity_mapping``).
 
-    Its timestamp is ``when`` if given; else, with the primary's ``period`` on the paper's shared
-    clock, the time of the step it is about, its ``t_sensor`` (the source's step k) plus
-    (k_apply - k) periods: Stone Soup predicts to a detection's time, and dated at t_sensor a
-    transfer would be applied a period early. Else its ``t_sensor``. A transfer stamped with
-    ``t_apply`` (operators on their own clocks) is dated on the primary's clock, which this
-    does not know: a ValueError unless ``when`` is given."""
+    Its timestamp is ``when`` if given; else, given the primary's ``steps`` (its step 0's time
+    and its period, the grid its own detections are dated on), the time of the step it is for,
+    ``start + k_apply * period``: Stone Soup predicts to a detection's time, and a transfer is a
+    statement about step k_apply. Else its ``t_sensor``, the wall-clock time of the source's
+    step k, one step earlier. A transfer stamped with ``t_apply`` (operators on their own
+    clocks) is dated on the primary's own schedule, which ``steps`` does not give: a ValueError
+    unless ``when`` is given."""
+    P = np.asarray(msg.P_eta, dtype=float)
     model = Sensor(
         spec=msg.sensor,
         ndim_state=ndim_state,
         mapping=tuple(mapping),
         velocity_mapping=None if velocity_mapping is None else tuple(velocity_mapping),
-        noise_covar=CovarianceMatrix(np.asarray(msg.P_eta, dtype=float)),
+        noise_covar=CovarianceMatrix(0.5 * (P + P.T)),  # symmetric to the wire's tolerance: exactly
     )
-    if when is None and period is not None:
+    if when is None and steps is not None:
         if msg.t_apply is not None:
             raise ValueError("a transfer for t_apply is dated on the primary's clock: give when")
-        when = timestamp(msg.t_sensor) + (msg.k_apply - msg.k) * period
+        start, period = steps
+        when = start + msg.k_apply * period
     return TransferDetection(
         StateVector(np.asarray(msg.eta, dtype=float)),
         timestamp=timestamp(msg.t_sensor) if when is None else when,

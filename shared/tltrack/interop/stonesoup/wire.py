@@ -71,7 +71,7 @@ _KEPT_LINKS = 1024
 class TransferReader(DetectionReader):
     """A Stone Soup detection feeder of the transfers a session receives: each as a
     :class:`~tltrack.interop.stonesoup.transfer.TransferDetection`, dated at the step it is for
-    given the primary's ``period`` (else at its source's time; see
+    given the primary's ``steps`` (else at its source's time; see
     :func:`~tltrack.interop.stonesoup.transfer.detection`).
 
     It subscribes when made (what arrives before it is read waits in a bounded queue), and stops
@@ -85,8 +85,9 @@ class TransferReader(DetectionReader):
     velocity_mapping: Sequence[int] | None = Property(
         default=None, doc="The state's (vx, vy) indices; default: each position index + 1."
     )
-    period: datetime.timedelta | None = Property(
-        default=None, doc="The primary's period: date each transfer at the step it is for."
+    steps: tuple[datetime.datetime, datetime.timedelta] | None = Property(
+        default=None,
+        doc="The primary's step 0's time and period: date each transfer at the step it is for.",
     )
     key: str = Property(default=keys.TRANSFERS, doc="The key expression to subscribe to.")
     count: int | None = Property(default=None, doc="Stop after this many transfers.")
@@ -134,9 +135,6 @@ class TransferReader(DetectionReader):
             self.rejects.add(item.key, refused[0])
             log.warning("refused a transfer on %s: %s", item.key, refused[1])
             return None
-        self._last[(msg.episode, msg.sender)] = msg.k_apply
-        if len(self._last) > _KEPT_LINKS:
-            self._last.pop(next(iter(self._last)))  # the oldest episode's
         return msg
 
     @BufferedGenerator.generator_method
@@ -159,11 +157,14 @@ class TransferReader(DetectionReader):
                     ndim_state=self.ndim_state,
                     mapping=self.mapping,
                     velocity_mapping=self.velocity_mapping,
-                    period=self.period,
+                    steps=self.steps,
                 )
             except ValueError as err:  # a sensor this state cannot express, a time it cannot date
                 self.rejects.add(item.key, "invalid")
                 log.warning("refused a transfer on %s: %s", item.key, err)
                 continue
+            self._last[(msg.episode, msg.sender)] = msg.k_apply  # delivered: its step is taken
+            if len(self._last) > _KEPT_LINKS:
+                self._last.pop(next(iter(self._last)))  # the oldest episode's
             taken += 1
             yield det.timestamp, {det}
