@@ -81,6 +81,15 @@ def _indices(mapping: Sequence[int], ndim_state: int, name: str) -> tuple[int, i
     return got[0], got[1]
 
 
+def _reads_velocity(spec: SensorSpec) -> bool:
+    """Does the sensor's h depend on the target's velocity (a Doppler's, a plugin kind's)?
+    Asked of h itself, on a scratch layout, not of a component's name."""
+    probe = from_spec(spec, Layout(pos=(0, 1), vel=(2, 3)))
+    x = np.array([[1234.5], [987.6], [3.0], [-4.0]])
+    moved = x + np.array([[0.0], [0.0], [5.0], [7.0]])
+    return not np.array_equal(probe.h(x), probe.h(moved))
+
+
 def _full(spec: Any) -> SensorSpec:
     """``spec`` (or the mapping of one) with every parameter its kind declares: the defaults
     filled in, and a ValueError naming those with none (a transfer carries a full description)."""
@@ -119,7 +128,7 @@ class Sensor(StoneSoupMeasurementModel, GaussianModel):
         pos = _indices(self.mapping, self.ndim_state, "mapping")
         vel = tuple(self.velocity_mapping or (i + 1 for i in pos))
         self.model: MeasurementModel = from_spec(self.spec, Layout(pos=pos, vel=(vel[0], vel[1])))
-        if "range_rate_mps" in self.model.components:  # it reads the velocity: (vx, vy) must be
+        if _reads_velocity(self.spec):  # (vx, vy) must then be two more of the state's indices
             vel = _indices(vel, self.ndim_state, "velocity_mapping")
             if set(vel) & set(pos):
                 raise ValueError(f"velocity_mapping {vel} overlaps the position's {pos}")
