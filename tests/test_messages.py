@@ -292,6 +292,16 @@ def test_a_transfer_names_every_parameter_of_its_sensor() -> None:
     assert decode(pack(d), Transfer).sensor.kind == "position"
 
 
+def test_a_time_past_the_year_5000_is_refused() -> None:
+    """A Stone Soup reader dates a message by its t_sensor: 1e12 s overflowed its datetime and
+    ended its generator."""
+    d = raw(VALID_TRANSFER)
+    d["t_sensor"] = 1e11
+    assert decode(pack(d), Transfer).t_sensor == 1e11
+    d["t_sensor"] = 1.0000001e11
+    assert reject(pack(d), Transfer) == "invalid"
+
+
 @pytest.mark.parametrize(("i", "typ"), [(1, Truth), (4, EstimateMsg)])
 @pytest.mark.parametrize("field", ["x", "pos"])
 def test_a_state_beyond_1e9_is_refused(i: int, typ: type[Message], field: str) -> None:
