@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -185,12 +186,9 @@ def test_where_one_clock_is_assumed_another_is_refused_with_the_reason(tmp_path:
     assert len(assemble(make_config(BASE), {})["pcrlb"]["primary"]) == 20
 
 
-def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
-    """Live, a transfer names the primary's sample (k_apply) and its time on the primary's
-    schedule (t_apply): one for another time, or none at all off the shared clock, or one made
-    later than now beyond the hosts' clock skew, is refused and counted, never kept for a step."""
-    svc = Offline("primary_tracker")
-    tracker = primary_svc.PrimaryTracker(primary_svc.Settings.model_validate({}), svc)
+def _open_off_the_clock(tracker: Any) -> Config:
+    """Open episode "e" on ``tracker``: a source s1 sampling every 4 s on a clock 0.25 s ahead,
+    off the paper's shared clock; its config."""
     cfg = make_config(
         BASE,
         max_clock_offset_s=0.25,
@@ -201,6 +199,16 @@ def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
         config=cfg.model_dump(mode="json"), K=cfg.K, steps_per_sec=0.0,
     )  # fmt: skip
     tracker.handle(received(keys.episode("e"), encode(start)))
+    return cfg
+
+
+def test_the_primary_takes_a_transfer_only_for_its_own_samples_time() -> None:
+    """Live, a transfer names the primary's sample (k_apply) and its time on the primary's
+    schedule (t_apply): one for another time, or none at all off the shared clock, or one made
+    later than now beyond the hosts' clock skew, is refused and counted, never kept for a step."""
+    svc = Offline("primary_tracker")
+    tracker = primary_svc.PrimaryTracker(primary_svc.Settings.model_validate({}), svc)
+    cfg = _open_off_the_clock(tracker)
     src = SourceEpisode(cfg, 0, "ukf", "s1")
     z = Measurement(episode="e", sender="s", k=1, t_sensor=0.0, sensor="s1",
                     z=[simulate(Setup(cfg), 0).z["s1"][0]])  # fmt: skip
@@ -243,16 +251,7 @@ def test_a_schedule_that_cannot_be_the_episodes_is_refused_and_counted(
 
     svc = Offline("source_tracker", keys.source_operator("s1"))
     tracker = source_svc.SourceTracker(source_svc.Settings.model_validate({}), svc)
-    cfg = make_config(
-        BASE,
-        max_clock_offset_s=0.25,
-        sources=[{"id": "s1", "period_s": 4.0, "clock_offset_s": 0.25}],
-    )
-    start = EpisodeStart(
-        episode="e", sender="sensor_sim", k=0, t_sensor=time.time(), run=0,
-        config=cfg.model_dump(mode="json"), K=cfg.K, steps_per_sec=0.0,
-    )  # fmt: skip
-    tracker.handle(received(keys.episode("e"), encode(start)))
+    _open_off_the_clock(tracker)
     for period, t0 in ((period_s, t0_s), (1.0, 0.0)):  # then the primary's own
         msg = Schedule(episode="e", sender=keys.PRIMARY, k=0, t_sensor=time.time(),
                        period_s=period, t0_s=t0)  # fmt: skip
