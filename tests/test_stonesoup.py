@@ -158,9 +158,9 @@ def test_a_transfer_goes_out_and_comes_back_as_a_detection() -> None:
     steps = (timestamp(100.0), datetime.timedelta(seconds=2.0))  # the primary's step grid
     dated = detection(back, ndim_state=5, mapping=LAYOUT.pos, steps=steps)
     assert dated.timestamp == timestamp(110.0)  # its step 5, whatever the source's clock said
-    off_clock = back.model_copy(update={"t_apply": 10.0})
-    with pytest.raises(ValueError, match="dated on the primary's clock"):
-        detection(off_clock, ndim_state=5, mapping=LAYOUT.pos, steps=steps)
+    off_clock = back.model_copy(update={"k": 7, "t_apply": 10.0})  # k_apply: the primary's sample
+    dated = detection(off_clock, ndim_state=5, mapping=LAYOUT.pos, steps=steps)
+    assert dated.timestamp == timestamp(110.0)  # was a ValueError: t_apply needed `when`
     skewed = back.model_copy(update={"P_eta": [[1e4, 0.010001], [0.01, 1e-5]]})  # the wire's
     assert decode(encode(skewed), Transfer) == skewed  # tolerance takes it, and so does a Sensor
     detection(skewed, ndim_state=5, mapping=LAYOUT.pos)

@@ -42,6 +42,8 @@ K = 30
 CT = {"ndim_state": 5, "mapping": (0, 2), "velocity_mapping": (1, 3)}  # the episode's layout
 #: the primary's step grid: step 0 at the epoch, a period of 1 s
 GRID = (datetime.datetime(1970, 1, 1), datetime.timedelta(seconds=1.0))
+#: a state of position only: no velocity for a Doppler sensor to read
+POSITION = {"ndim_state": 2, "mapping": (0, 1)}
 
 
 def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> None:
@@ -104,26 +106,31 @@ def test_a_stone_soup_tracker_takes_a_live_sources_transfers(tmp_path: Path) -> 
 
 def test_the_reader_refuses_what_the_primary_refuses(tmp_path: Path) -> None:
     """A transfer on s1's key sent as s2, a payload that is no transfer, one over the size limit
-    (dropped uncounted before), one for the primary's own schedule (t_apply, which the reader's
-    step grid cannot date), the good one again and one for an earlier step (a second update, a
-    prediction backwards) are counted and skipped; the good ones are read, dated at their
-    steps. Closed, the reader ends at once (it spun on the closed subscriber)."""
+    (dropped uncounted before), a Doppler one the reader's position-only state cannot express,
+    the good one again and one for an earlier step (a second update, a prediction backwards)
+    are counted and skipped; the good ones are read, dated at their steps, one stamped for the
+    primary's own schedule (t_apply) too (it was refused: k_apply numbers the primary's samples
+    on any clock). Closed, the reader ends at once (it spun on the closed subscriber)."""
     good = Transfer(
         episode="e", sender="s1", k=3, t_sensor=3.0, k_apply=4, sensor=RADAR,
         eta=[1000.0, 0.5], P_eta=[[25.0, 0.0], [0.0, 1e-4]],
     )  # fmt: skip
+    doppler = Transfer.model_validate({
+        **good.model_dump(), "sensor": {**RADAR, "kind": "range-bearing-doppler"},
+        "eta": [1000.0, 0.5, 3.0], "P_eta": np.diag([25.0, 1e-4, 1.0]).tolist(),
+    })  # fmt: skip
     with stack(tmp_path) as s:
         s.start_router()
         with (
             supervisor.client(s.endpoint) as z,
-            TransferReader(session=z, count=2, idle_s=20.0, steps=GRID, **CT) as reader,
+            TransferReader(session=z, count=2, idle_s=20.0, steps=GRID, **POSITION) as reader,
         ):
             key = keys.transfer("s1", "e")
             z.put(key, encode(good.model_copy(update={"sender": "s2"})))
             z.put(key, b"\x93not a transfer")
             z.put(key, b"\x00" * (MAX_PAYLOAD_BYTES + 1))
-            z.put(key, encode(good.model_copy(update={"t_apply": 4.0})))
-            z.put(key, encode(good))
+            z.put(key, encode(doppler))
+            z.put(key, encode(good.model_copy(update={"k": 1, "t_apply": 4.0})))
             z.put(key, encode(good))
             z.put(key, encode(good.model_copy(update={"k": 1, "k_apply": 2})))
             z.put(key, encode(good.model_copy(update={"k": 4, "k_apply": 5})))

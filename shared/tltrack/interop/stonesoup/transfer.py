@@ -124,10 +124,9 @@ def detection(
     Its timestamp is ``when`` if given; else, given the primary's ``steps`` (its step 0's time
     and its period, the grid its own detections are dated on), the time of the step it is for,
     ``start + k_apply * period``: Stone Soup predicts to a detection's time, and a transfer is a
-    statement about step k_apply. Else its ``t_sensor``, the wall-clock time of the source's
-    step k, one step earlier. A transfer stamped with ``t_apply`` (operators on their own
-    clocks) is dated on the primary's own schedule, which ``steps`` does not give: a ValueError
-    unless ``when`` is given."""
+    statement about step k_apply. On the paper's shared clock and off it alike (a transfer
+    stamped with ``t_apply``), k_apply numbers the primary's own samples, so the grid dates both.
+    Else its ``t_sensor``, the wall-clock time of the source's step k, one step earlier."""
     P = np.asarray(msg.P_eta, dtype=float)
     model = Sensor(
         spec=msg.sensor,
@@ -137,8 +136,6 @@ def detection(
         noise_covar=CovarianceMatrix(0.5 * (P + P.T)),  # symmetric to the wire's tolerance: exactly
     )
     if when is None and steps is not None:
-        if msg.t_apply is not None:
-            raise ValueError("a transfer for t_apply is dated on the primary's clock: give when")
         start, period = steps
         when = start + msg.k_apply * period
     return TransferDetection(

@@ -159,7 +159,7 @@ class TransferReader(DetectionReader):
                     velocity_mapping=self.velocity_mapping,
                     steps=self.steps,
                 )
-            except ValueError as err:  # a sensor this state cannot express, a time it cannot date
+            except ValueError as err:  # a sensor this state cannot express
                 self.rejects.add(item.key, "invalid")
                 log.warning("refused a transfer on %s: %s", item.key, err)
                 continue
